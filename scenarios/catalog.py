@@ -1,0 +1,36 @@
+"""Where scenario files live: built-in names resolve to the YAML files shipped in this package."""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_SCENARIO = "aws_small_warehouse"
+
+
+class ScenarioNotFound(FileNotFoundError):
+    """A scenario name or path that names no file."""
+
+
+def builtin_scenarios() -> list[str]:
+    return sorted(p.stem for p in HERE.glob("*.yaml"))
+
+
+def find_scenario(name_or_path: str | Path | None = None) -> Path:
+    """The YAML file of a built-in scenario name, or the given path if it exists."""
+    if name_or_path is None:
+        name_or_path = DEFAULT_SCENARIO
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        if not p.is_file():
+            raise ScenarioNotFound(f"scenario file {p} does not exist")
+        return p
+    candidate = HERE / f"{name_or_path}.yaml"
+    if candidate.is_file():
+        return candidate
+    names = builtin_scenarios()
+    hint = difflib.get_close_matches(str(name_or_path), names, n=1)
+    more = f"; did you mean {hint[0]!r}?" if hint else ""
+    raise ScenarioNotFound(
+        f"no scenario named {str(name_or_path)!r} (built-in: {', '.join(names) or 'none'}){more}")

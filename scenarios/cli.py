@@ -1,0 +1,108 @@
+"""The command line, ``mapupdate``: parses arguments and calls the library; nothing else.
+
+Heavy modules (numba kernels, pymunk, matplotlib) are imported inside the subcommands so that
+``mapupdate --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _cmd_compare(args) -> int:
+    from gridmap import load_map
+    from gridmap.metrics import compare_maps
+
+    a, b = load_map(args.a), load_map(args.b)
+    m = compare_maps(a, b)
+    print(f"{'metric':<8}{'value':>10}")
+    print(f"{'CC':<8}{m['cc']:>9.2f}%")
+    print(f"{'MS':<8}{m['ms']:>9.2f}%")
+    print(f"{'OPDF':<8}{m['opdf']:>9.2f}%")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    import sim
+
+    from .catalog import find_scenario
+
+    scenario = sim.load_scenario(find_scenario(args.scenario))
+    sim.render_world(scenario, args.session, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_run(args) -> int:
+    from .runner import RunOptions, run_scenario
+
+    opts = RunOptions(out=args.out, seed=args.seed, sessions=args.sessions, quick=args.quick,
+                      progress=not args.no_progress)
+    result = run_scenario(args.scenario, opts)
+    print(f"wrote {result.out_dir}/report.md and metrics.json")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="mapupdate",
+        description="Keep a 2D occupancy-grid map true while the world changes.")
+    p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="play a scenario's sessions end to end and report scores")
+    run.add_argument("scenario", nargs="?", default=None,
+                     help="built-in scenario name or YAML path (default: aws_small_warehouse)")
+    run.add_argument("--out", type=Path, default=None,
+                     help="output folder (default: runs/<scenario>-<timestamp>)")
+    run.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
+    run.add_argument("--sessions", type=int, default=None,
+                     help="run only the first K sessions")
+    run.add_argument("--quick", action="store_true",
+                     help="short routes that still keep every change in view (for CI)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bars")
+    run.set_defaults(func=_cmd_run)
+
+    cmp_ = sub.add_parser("compare", help="CC, MS and OPDF of two map_server maps")
+    cmp_.add_argument("a", type=Path)
+    cmp_.add_argument("b", type=Path)
+    cmp_.set_defaults(func=_cmd_compare)
+
+    ren = sub.add_parser("render", help="draw a session's world to a PNG")
+    ren.add_argument("scenario", nargs="?", default=None)
+    ren.add_argument("--session", default="W1", help="session name or index (default W1)")
+    ren.add_argument("--out", type=Path, default=Path("world.png"))
+    ren.set_defaults(func=_cmd_render)
+    return p
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """The documented errors of every package: reported in one line, never a traceback."""
+    errors: list[type[BaseException]] = [FileNotFoundError, PermissionError, IsADirectoryError]
+    for module, name in (("gridmap", "GridError"), ("sim", "ScenarioError"),
+                         ("updater", "UpdaterError"), ("localization", "LocalizationError"),
+                         ("scenarios.catalog", "ScenarioNotFound")):
+        mod = sys.modules.get(module)
+        if mod is not None and hasattr(mod, name):
+            errors.append(getattr(mod, name))
+    return tuple(errors)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("mapupdate: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - sorted into user errors and bugs just below
+        if args.debug or not isinstance(exc, _user_errors()):
+            raise
+        print(f"mapupdate {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

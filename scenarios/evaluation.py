@@ -1,0 +1,150 @@
+"""Scores of a session, as ../shared/EVALUATION.md defines them: observable and target cells,
+change detection with one cell of slack, ghosts, the oracle map and APE statistics.
+
+Every function takes whole grids (int8, ROS convention) or pose arrays and returns numbers;
+nothing here knows about the simulator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid, Pose2D
+
+OBSERVATION_RANGE = 10.0  # [m] beams observe cells up to this distance
+MIN_OBSERVATIONS = 7      # the updater's decision threshold T
+
+
+def _cells(m) -> np.ndarray:
+    return m.data if isinstance(m, OccupancyGrid) else np.asarray(m)
+
+
+def near(mask: np.ndarray) -> np.ndarray:
+    """Cells with a True cell within one cell (8-neighbourhood, itself included)."""
+    out = mask.copy()
+    out[1:, :] |= mask[:-1, :]
+    out[:-1, :] |= mask[1:, :]
+    tmp = out.copy()
+    out[:, 1:] |= tmp[:, :-1]
+    out[:, :-1] |= tmp[:, 1:]
+    return out
+
+
+class ObservationCounter:
+    """Counts, per cell, the scans whose beams hit or pass through it within ``max_range``."""
+
+    def __init__(self, frame: OccupancyGrid, max_range: float = OBSERVATION_RANGE):
+        self.frame = frame
+        self.max_range = max_range
+        self.counts = np.zeros(frame.shape, np.int32)
+        self._stamp = np.full(frame.shape, -1, np.int64)
+        self._scans = 0
+        cap = 4 * int(max_range / frame.resolution) + 8
+        self._rows = np.empty(cap, np.int64)
+        self._cols = np.empty(cap, np.int64)
+
+    def add_scan(self, sensor_pose: Pose2D, ranges: np.ndarray, angles: np.ndarray) -> None:
+        """One noise-free scan; ``inf`` ranges pass through up to ``max_range``."""
+        from . import _kernels
+
+        r = np.minimum(np.where(np.isfinite(ranges), ranges, np.inf), self.max_range)
+        a = np.asarray(angles, np.float64) + sensor_pose.theta
+        res = self.frame.resolution
+        ox, oy = self.frame.origin
+        gx0, gy0 = (sensor_pose.x - ox) / res, (sensor_pose.y - oy) / res
+        end_gx = gx0 + r * np.cos(a) / res
+        end_gy = gy0 + r * np.sin(a) / res
+        _kernels.count_observations(self.counts, self._stamp, self._scans, gx0, gy0,
+                                    end_gx, end_gy, self._rows, self._cols)
+        self._scans += 1
+
+    def observable(self, min_scans: int = MIN_OBSERVATIONS) -> np.ndarray:
+        return self.counts >= min_scans
+
+
+def paint_people(mask: np.ndarray, frame: OccupancyGrid, people: np.ndarray) -> None:
+    """Mark in ``mask`` the cells covered by people given as rows (x, y, radius) [m]."""
+    if len(people) == 0:
+        return
+    from . import _kernels
+
+    p = np.asarray(people, np.float64)
+    res = frame.resolution
+    _kernels.paint_discs(mask, (p[:, 0] - frame.origin[0]) / res,
+                         (p[:, 1] - frame.origin[1]) / res, p[:, 2] / res)
+
+
+def wrong_cells(previous, truth) -> tuple[np.ndarray, np.ndarray]:
+    """Cells of the previous map that are wrong about the world: (wrongly occupied, wrongly
+    free), each with one cell of slack."""
+    prev, true = _cells(previous), _cells(truth)
+    if prev.shape != true.shape:
+        raise GridError(f"maps of shape {prev.shape} and {true.shape} cannot be compared")
+    wrong_occ = (prev == OCCUPIED) & (true == FREE) & ~near(true == OCCUPIED)
+    wrong_free = (prev == FREE) & (true == OCCUPIED) & ~near(prev == OCCUPIED)
+    return wrong_occ, wrong_free
+
+
+def change_detection(previous, updated, truth, observable: np.ndarray) -> dict:
+    """Precision, recall, F1 and recall_all of the changes from ``previous`` to ``updated``."""
+    prev, upd, true = _cells(previous), _cells(updated), _cells(truth)
+    changed = upd != prev
+    to_free = changed & (upd == FREE)
+    to_occ = changed & (upd == OCCUPIED)
+    correct = (to_free & (true == FREE)) | (to_occ & near(true == OCCUPIED))
+    n_changes = int(changed.sum())
+    n_correct = int(correct.sum())
+
+    wrong_occ, wrong_free = wrong_cells(prev, true)
+    fixed = (wrong_occ & (upd == FREE)) | (wrong_free & near(upd == OCCUPIED))
+    wrong = wrong_occ | wrong_free
+    targets = wrong & observable
+    n_targets, n_wrong = int(targets.sum()), int(wrong.sum())
+    precision = n_correct / n_changes if n_changes else None
+    recall = int((fixed & targets).sum()) / n_targets if n_targets else None
+    recall_all = int((fixed & wrong).sum()) / n_wrong if n_wrong else None
+    f1 = (2 * precision * recall / (precision + recall)
+          if precision is not None and recall is not None and precision + recall > 0 else None)
+    known = int((prev != UNKNOWN).sum())
+    return {
+        "precision": precision, "recall": recall, "f1": f1, "recall_all": recall_all,
+        "changes": n_changes, "correct_changes": n_correct,
+        "incorrect_changes": n_changes - n_correct,
+        "incorrect_changes_pct_of_known": 100.0 * (n_changes - n_correct) / max(known, 1),
+        "target_cells": n_targets, "targets_fixed": int((fixed & targets).sum()),
+        "wrong_cells": n_wrong, "observable_cells": int(observable.sum()),
+    }
+
+
+def ghost_cells(updated, truth, people_mask: np.ndarray) -> int:
+    """Cells occupied in the updated map, far from every occupied cell of the truth, that a
+    person covered at some time."""
+    upd, true = _cells(updated), _cells(truth)
+    return int(((upd == OCCUPIED) & ~near(true == OCCUPIED) & people_mask).sum())
+
+
+def oracle_map(previous: OccupancyGrid, truth, observable: np.ndarray) -> OccupancyGrid:
+    """The perfect updater's map: the previous map with every target cell set to the truth."""
+    wrong_occ, wrong_free = wrong_cells(previous, truth)
+    data = previous.data.copy()
+    data[wrong_occ & observable] = FREE
+    data[wrong_free & observable] = OCCUPIED
+    return previous.with_data(data)
+
+
+def ape_statistics(estimated_xy, true_xy) -> dict:
+    """Absolute position error statistics [m], no alignment, as evo reports them."""
+    est = np.asarray(estimated_xy, np.float64).reshape(-1, 2)
+    true = np.asarray(true_xy, np.float64).reshape(-1, 2)
+    if est.shape != true.shape:
+        raise ValueError(f"{len(est)} estimated and {len(true)} true positions do not pair up")
+    if len(est) == 0:
+        return {k: None for k in ("max", "mean", "median", "min", "rmse", "sse", "std")}
+    e = np.hypot(*(est - true).T)
+    return {
+        "max": float(e.max()), "mean": float(e.mean()), "median": float(np.median(e)),
+        "min": float(e.min()), "rmse": float(math.sqrt(np.mean(e * e))),
+        "sse": float(np.sum(e * e)), "std": float(e.std()),
+    }

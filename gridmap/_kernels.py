@@ -122,10 +122,12 @@ def is_blocking(v, block_unknown):
 def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
     """Walk from (gx0, gy0) along the unit direction (cos_a, sin_a) for at most ``max_len`` grid
     units. Returns (t, status): the distance to where the ray enters the first blocking cell
-    (status HIT; 0 if it starts in one), or to where it leaves the grid (LEFT_GRID), or
-    (max_len, NO_HIT)."""
+    (status HIT; 0 if it starts in one), or to where it leaves the grid (LEFT_GRID; 0 if it
+    starts outside and unknown blocks), or (max_len, NO_HIT)."""
     height = data.shape[0]
     width = data.shape[1]
+    if block_unknown and not (0.0 <= gx0 < width and 0.0 <= gy0 < height):
+        return 0.0, LEFT_GRID  # outside the map is unknown, so it blocks at once
     # Enter the grid if the start lies outside it.
     t0, t1 = clip_to_box(gx0, gy0, cos_a * max_len, sin_a * max_len, float(width), float(height))
     if t0 > t1:

@@ -1,0 +1,258 @@
+"""CARMEN log files: a text line per message, the first word naming the message.
+
+Read here (every line ends ``timestamp [host logger_timestamp]``; the timestamp is used):
+
+- ``FLASER n r1..rn x y theta odom_x odom_y odom_theta`` and ``RLASER`` (same fields, rear
+  laser): ``x y theta`` is the laser's pose and ``odom_*`` the robot's odometry pose, both as
+  the log has them (in a corrected log, the corrected poses). The beams cover 180 degrees from
+  -90 degrees: ``pi / n`` apart for an even ``n`` (180 beams at 1 degree, the Intel lab log),
+  ``pi / (n - 1)`` for an odd ``n`` (181 beams from -90 to +90 degrees). A reading at or beyond
+  the lidar's "no return" value (81.83 m for the SICK LMS) becomes ``inf``.
+- ``ROBOTLASER1`` / ``ROBOTLASER2 laser_type start_angle fov resolution max_range accuracy
+  remission_mode n r1..rn m rem1..remm laser_x laser_y laser_theta robot_x robot_y robot_theta
+  tv rv forward_safety side_safety turn_axis``: the scan brings its own angles and range limit
+  (a reading at or beyond ``max_range`` is ``inf``).
+- ``ODOM x y theta tv rv accel``: the robot's odometry pose.
+- ``TRUEPOS x y theta odom_x odom_y odom_theta``: a simulator's true pose.
+
+Other CARMEN messages (``PARAM``, ``SYNC``, ``NEFF``, ``RAWLASER1`` ...) and ``#`` comments are
+counted and left out. A malformed line (truncated, a beam count that disagrees with the line, a
+field that is not a number, an unknown message) raises :class:`LogError` naming the line with
+``strict=True``; by default it is skipped and counted in :class:`ReadStats`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import Pose2D, Scan
+from gridmap.types import GridError
+
+from .records import LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRecord
+
+# The SICK LMS reports 8183 cm when no echo came back; CARMEN logs keep that value.
+FLASER_NO_RETURN = 81.83
+# Readings below 1 cm are the lidar's error codes (dazzle, no measurement), not obstacles.
+RANGE_MIN = 0.01
+
+OLD_LASERS = {"FLASER": "front_laser", "RLASER": "rear_laser"}
+ROBOT_LASERS = {"ROBOTLASER1": "laser1", "ROBOTLASER2": "laser2"}
+# Well-formed CARMEN messages this reader has no use for: counted, never an error.
+IGNORED = frozenset({
+    "PARAM", "SYNC", "NEFF", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4", "LASER3",
+    "LASER4", "POSITIONLASER", "NMEAGGA", "NMEARMC", "GPSNMEA", "SONAR", "BUMPER", "SCANMARK",
+    "IMU", "VECTORMOVE", "ROBOTVELOCITY", "FOLLOWTRAJECTORY", "BASEVELOCITY", "ARM",
+})
+
+
+class _LineProblem(Exception):
+    """A malformed line: ``kind`` groups the counts, the message says what is wrong."""
+
+    def __init__(self, kind: str, message: str):
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass
+class CarmenLog:
+    """The records of a CARMEN log in time order, and what was skipped on the way."""
+
+    source: str
+    records: list[Record] = field(default_factory=list)
+    stats: ReadStats = field(default_factory=ReadStats)
+
+    def scans(self) -> list[ScanRecord]:
+        return [r for r in self.records if isinstance(r, ScanRecord)]
+
+    def odometry(self) -> list[OdomRecord]:
+        return [r for r in self.records if isinstance(r, OdomRecord)]
+
+
+def read_carmen(path, *, strict: bool = False,
+                flaser_no_return: float = FLASER_NO_RETURN) -> CarmenLog:
+    """Read a CARMEN log file (see the module docstring for the lines understood).
+
+    ``strict`` turns the first malformed line into a :class:`LogError` naming it; otherwise
+    such lines are skipped and counted in ``.stats``. A log with no usable line at all is an
+    error either way.
+    """
+    path = Path(path)
+    try:
+        with path.open("r", encoding="utf-8", errors="replace") as f:
+            log = parse_carmen(f, source=str(path), strict=strict,
+                               flaser_no_return=flaser_no_return)
+    except (IsADirectoryError, FileNotFoundError, PermissionError):
+        raise
+    except OSError as e:
+        raise LogError(f"{path}: cannot read: {e}") from None
+    if not log.records:
+        raise LogError(f"{path}: no usable CARMEN line (laser, ODOM or TRUEPOS); "
+                       f"{log.stats.summary()}")
+    return log
+
+
+def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool = False,
+                 flaser_no_return: float = FLASER_NO_RETURN) -> CarmenLog:
+    """Parse CARMEN lines; records come back sorted by time (stable, so ties keep file order)."""
+    log = CarmenLog(source)
+    for lineno, line in enumerate(lines, start=1):
+        words = line.split()
+        if not words or words[0].startswith("#"):
+            continue
+        try:
+            record = parse_line(words, flaser_no_return)
+        except _LineProblem as p:
+            message = f"{source}:{lineno}: {p}"
+            if strict:
+                raise LogError(message) from None
+            log.stats.skip(p.kind, message)
+            continue
+        if record is None:
+            log.stats.ignored[words[0]] += 1
+        else:
+            log.records.append(record)
+    log.records.sort(key=lambda r: r.time)
+    return log
+
+
+def parse_line(words: list[str], flaser_no_return: float = FLASER_NO_RETURN) -> Record | None:
+    """One CARMEN line split into words -> a record, or None for a message left out.
+
+    Raises ``_LineProblem`` for a malformed line."""
+    kind = words[0]
+    if kind in OLD_LASERS:
+        return _old_laser(words, flaser_no_return)
+    if kind in ROBOT_LASERS:
+        return _robot_laser(words)
+    if kind == "ODOM":
+        v = _numbers(words, 1, 8, "ODOM x y theta tv rv accel timestamp")
+        _check_trailing(words, 8)
+        return OdomRecord(v[6], Pose2D(*v[0:3]), velocity=(v[3], 0.0, v[4]),
+                          topic="ODOM")
+    if kind == "TRUEPOS":
+        v = _numbers(words, 1, 8, "TRUEPOS x y theta odom_x odom_y odom_theta timestamp")
+        _check_trailing(words, 8)
+        return PoseRecord(v[6], Pose2D(*v[0:3]), topic="TRUEPOS")
+    if kind in IGNORED:
+        return None
+    raise _LineProblem("unknown message", f"unknown message type {kind[:40]!r}")
+
+
+def _old_laser(words: list[str], no_return: float) -> ScanRecord:
+    """FLASER / RLASER: beam count, ranges, laser pose, odometry pose, timestamp."""
+    name = words[0]
+    n = _count(words, 1, name)
+    fixed = 6 + 1  # two poses and the timestamp after the ranges
+    _check_length(words, 2 + n + fixed, name, f"{n} ranges")
+    ranges = _numbers(words, 2, 2 + n, f"{name} range")
+    v = _numbers(words, 2 + n, 2 + n + fixed, f"{name} pose or timestamp")
+    _check_trailing(words, 2 + n + fixed)
+    if n > 0 and n % 2 == 1:
+        increment = math.pi / max(n - 1, 1)
+    else:
+        increment = math.pi / max(n, 1)
+    r = np.asarray(ranges, np.float64)
+    if np.any(r < 0):
+        raise _LineProblem("bad value", f"{name} has a negative range")
+    r[r >= no_return - 1e-6] = np.inf
+    scan = _scan(r, -math.pi / 2, increment, RANGE_MIN, no_return, v[6], name)
+    return ScanRecord(v[6], scan, frame_id=OLD_LASERS[name], topic=name,
+                      laser_pose=Pose2D(*v[0:3]),
+                      odom_pose=Pose2D(*v[3:6]))
+
+
+def _robot_laser(words: list[str]) -> ScanRecord:
+    """ROBOTLASER1/2: the scan's own angles and range limit, remissions, laser and robot pose."""
+    name = words[0]
+    head = _numbers(words, 2, 8, f"{name} start_angle fov resolution max_range accuracy mode")
+    start, _fov, resolution, max_range = head[0], head[1], head[2], head[3]
+    n = _count(words, 8, name)
+    _check_length(words, 9 + n + 1, name, f"{n} ranges and a remission count")
+    ranges = _numbers(words, 9, 9 + n, f"{name} range")
+    m = _count(words, 9 + n, f"{name} remission")
+    base = 10 + n + m
+    fixed = 6 + 5 + 1  # laser pose, robot pose, tv rv safety distances turn axis, timestamp
+    _check_length(words, base + fixed, name, f"{n} ranges and {m} remissions")
+    v = _numbers(words, base, base + fixed, f"{name} pose, velocity or timestamp")
+    _check_trailing(words, base + fixed)
+    if not (max_range > 0):
+        raise _LineProblem("bad value", f"{name} max_range must be positive, got {max_range}")
+    r = np.asarray(ranges, np.float64)
+    if np.any(r < 0):
+        raise _LineProblem("bad value", f"{name} has a negative range")
+    r[r >= max_range] = np.inf
+    scan = _scan(r, start, resolution, min(RANGE_MIN, 0.5 * max_range), max_range, v[11], name)
+    return ScanRecord(v[11], scan, frame_id=ROBOT_LASERS[name], topic=name,
+                      laser_pose=Pose2D(*v[0:3]),
+                      odom_pose=Pose2D(*v[3:6]))
+
+
+# --- field helpers -----------------------------------------------------------------------------
+
+def _numbers(words: list[str], start: int, stop: int, what: str) -> list[float]:
+    """Words [start, stop) as floats; the problem names the field (1-based word number)."""
+    if len(words) < stop:
+        raise _LineProblem("truncated", f"{words[0]} line truncated: {len(words)} fields, "
+                                        f"{stop} needed ({what})")
+    out = []
+    for i in range(start, stop):
+        try:
+            x = float(words[i])
+        except ValueError:
+            raise _LineProblem("not a number", f"{words[0]} field {i + 1} ({what}) is not a "
+                                               f"number: {words[i][:40]!r}") from None
+        if math.isnan(x) or (math.isinf(x) and "range" not in what):
+            raise _LineProblem("not a number", f"{words[0]} field {i + 1} ({what}) is not "
+                                               f"finite: {words[i][:40]!r}")
+        out.append(x)
+    return out
+
+
+def _count(words: list[str], i: int, what: str) -> int:
+    if len(words) <= i:
+        raise _LineProblem("truncated", f"{words[0]} line truncated before its {what} count")
+    try:
+        n = int(words[i])
+    except ValueError:
+        raise _LineProblem("not a number", f"{words[0]} field {i + 1} ({what} count) is not "
+                                           f"an integer: {words[i][:40]!r}") from None
+    if n < 0 or n > 100_000:
+        raise _LineProblem("wrong beam count", f"{words[0]} field {i + 1}: {what} count {n} "
+                                               "is out of range")
+    return n
+
+
+def _check_length(words: list[str], need: int, name: str, declared: str) -> None:
+    if len(words) < need:
+        raise _LineProblem(
+            "truncated", f"{name} declares {declared} and needs at least {need} fields, found "
+                         f"{len(words)} (truncated line or wrong beam count)")
+
+
+def _check_trailing(words: list[str], end: int) -> None:
+    """After the timestamp only ``host logger_timestamp`` may follow."""
+    extra = len(words) - end
+    if extra > 2:
+        raise _LineProblem(
+            "wrong beam count", f"{words[0]} has {extra} fields after its timestamp where at "
+                                "most 2 (host, logger timestamp) belong (wrong beam count?)")
+    if extra == 2:
+        try:
+            float(words[end + 1])
+        except ValueError:
+            raise _LineProblem("not a number", f"{words[0]} field {end + 2} (logger timestamp) "
+                                               f"is not a number: {words[end + 1][:40]!r}") from None
+
+
+def _scan(ranges: np.ndarray, angle_min: float, increment: float, range_min: float,
+          range_max: float, time: float, name: str) -> Scan:
+    try:
+        return Scan(ranges.astype(np.float32), float(angle_min), float(increment),
+                    float(range_min), float(range_max), float(time))
+    except GridError as e:
+        raise _LineProblem("bad value", f"{name}: {e}") from None

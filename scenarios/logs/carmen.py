@@ -107,7 +107,7 @@ def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool 
         try:
             record = parse_line(words, flaser_no_return)
         except _LineProblem as p:
-            message = f"{source}:{lineno}: {p}"
+            message = f"{source}, line {lineno}: {p}"
             if strict:
                 raise LogError(message) from None
             log.stats.skip(p.kind, message)

@@ -25,6 +25,7 @@ HOLD_S = 0.5
 class PoseTimeline:
     """Poses of one frame in another at increasing times; built by ``add``, read by ``at``."""
 
+    hold_after: float | None = None  # [s] past the last stamp; None: the ``hold`` asked for
     _t: list = field(default_factory=list)
     _p: list = field(default_factory=list)
     _arrays: tuple | None = None
@@ -52,7 +53,8 @@ class PoseTimeline:
         if not self._t:
             return None
         t, p = self._frozen()
-        if time < t[0] - hold or time > t[-1] + hold:
+        after = hold if self.hold_after is None else self.hold_after
+        if time < t[0] - hold or time > t[-1] + after:
             return None
         x = np.interp(time, t, p[:, 0])
         y = np.interp(time, t, p[:, 1])
@@ -74,9 +76,10 @@ class TransformTree:
     static: dict = field(default_factory=dict)   # child -> Pose2D
     dynamic: dict = field(default_factory=dict)  # child -> PoseTimeline
 
-    def add(self, rec: TransformRecord) -> None:
+    def add(self, rec: TransformRecord, hold_after: float | None = None) -> None:
         """Add one edge; an edge that would give a frame a second parent is ignored (tf's
-        own rule: the first parent wins)."""
+        own rule: the first parent wins). ``hold_after`` [s]: how long the edge's last pose
+        holds (a localiser's correction holds until the next one)."""
         known = self.parent.get(rec.child)
         if known is not None and known != rec.parent:
             return
@@ -84,7 +87,7 @@ class TransformTree:
         if rec.static:
             self.static[rec.child] = rec.pose
         else:
-            self.dynamic.setdefault(rec.child, PoseTimeline()).add(rec.time, rec.pose)
+            self.dynamic.setdefault(rec.child, PoseTimeline(hold_after)).add(rec.time, rec.pose)
 
     def has_edge(self, parent: str, child: str) -> bool:
         return self.parent.get(child) == parent

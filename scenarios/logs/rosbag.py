@@ -77,14 +77,28 @@ def bag_topics(path) -> dict[str, str]:
         reader.close()
 
 
+def scan_count(path, scan_topics=None) -> int:
+    """How many scans :func:`read_bag` will yield with these scan topics (for progress bars)."""
+    reader = _open(Path(path))
+    try:
+        info = reader.topics
+        available = {n: i.msgtype or "?" for n, i in info.items()}
+        topics = resolve_topics(available, scan_topics=scan_topics, source=str(path))
+        return int(sum(info[t].msgcount for t in topics.scans))
+    finally:
+        reader.close()
+
+
 def resolve_topics(available: dict[str, str], *, scan_topics=None, odom_topic=None,
-                   pose_topic=None, truth_topic=None, source: str = "bag") -> BagTopics:
+                   pose_topic=None, truth_topic=None, source: str = "bag",
+                   need_scans: bool = True) -> BagTopics:
     """Choose the topics to read from those a bag has.
 
     A topic given by name must exist with a fitting type, else :class:`LogError` lists the
     bag's topics. Left as None: scans are ``/scan`` if present, else every LaserScan topic
-    (at least one is needed); odometry ``/odom``, pose ``/amcl_pose``, truth
-    ``/ground_truth/pose``, ``/tf`` and ``/tf_static`` are read when present.
+    (at least one is needed, unless ``need_scans`` is False); odometry ``/odom``, pose
+    ``/amcl_pose``, truth ``/ground_truth/pose``, ``/tf`` and ``/tf_static`` are read when
+    present.
     """
     default = BagTopics()
 
@@ -109,7 +123,7 @@ def resolve_topics(available: dict[str, str], *, scan_topics=None, odom_topic=No
         scans = ("/scan",)
     else:
         scans = tuple(sorted(t for t, ty in available.items() if ty == LASER_SCAN))
-        if not scans:
+        if not scans and need_scans:
             raise LogError(f"{source}: no sensor_msgs/LaserScan topic; the bag has "
                            f"{_listing(available)}")
     return BagTopics(
@@ -138,7 +152,8 @@ def read_bag(path, *, scan_topics=None, odom_topic=None, pose_topic=None, truth_
     try:
         available = {n: i.msgtype or "?" for n, i in reader.topics.items()}
         topics = resolve_topics(available, scan_topics=scan_topics, odom_topic=odom_topic,
-                                pose_topic=pose_topic, truth_topic=truth_topic, source=str(path))
+                                pose_topic=pose_topic, truth_topic=truth_topic, source=str(path),
+                                need_scans="scan" in kinds)
         wanted = _wanted(topics, kinds)
         connections = [c for c in reader.connections if c.topic in wanted]
         for conn, stamp_ns, raw in reader.messages(connections=connections):

@@ -48,14 +48,12 @@ def cast_rays(grid: OccupancyGrid, origin: Pose2D, angles, max_range: float,
     if not (max_range > 0):
         raise GridError(f"max_range must be positive, got {max_range}")
     k = _kernels()
-    angles = np.ascontiguousarray(angles, dtype=np.float64).reshape(-1) + origin.theta
+    angles = np.asarray(angles, dtype=np.float64)
+    if angles.ndim != 1:
+        angles = angles.reshape(-1)
     res = grid.resolution
-    gx0 = (origin.x - grid.origin[0]) / res
-    gy0 = (origin.y - grid.origin[1]) / res
-    t = np.empty(angles.size, np.float64)
-    status = np.empty(angles.size, np.int64)
-    k.cast_beams(grid.data, gx0, gy0, angles, max_range / res, block_unknown, t, status)
-    ranges = t * res
-    blocked = (status == k.HIT) | ((status == k.LEFT_GRID) & block_unknown)
-    ranges[~blocked] = np.inf
+    sensor = np.array([(origin.x - grid.origin[0]) / res, (origin.y - grid.origin[1]) / res,
+                       origin.theta])
+    ranges = np.empty(angles.size, np.float64)
+    k.cast_ranges(grid.data, sensor, angles, max_range / res, bool(block_unknown), res, ranges)
     return ranges

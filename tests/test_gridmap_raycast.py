@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from gridmap import OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
@@ -37,11 +37,16 @@ def touches(cell, seg, eps=1e-9):
 
 
 def dense_cells(x0, y0, x1, y1, height, width, per_cell=40):
-    """Cells (row, col) that points sampled densely along the segment fall in, in order."""
+    """Cells (row, col) that points sampled densely along the segment fall in, in order.
+
+    A sample within rounding of a grid line it moves across is left out: which side of the line
+    it falls on is rounding, not geometry (the end points are checked on their own)."""
     n = int(math.ceil(max(abs(x1 - x0), abs(y1 - y0)) * per_cell)) + 2
     t = np.linspace(0.0, 1.0, n)
     xs, ys = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
-    inside = (xs >= 0) & (xs < width) & (ys >= 0) & (ys < height)
+    on_line = (((x1 != x0) & (np.abs(xs - np.round(xs)) < 1e-9))
+               | ((y1 != y0) & (np.abs(ys - np.round(ys)) < 1e-9)))
+    inside = (xs >= 0) & (xs < width) & (ys >= 0) & (ys < height) & ~on_line
     cells = np.stack([np.floor(ys[inside]), np.floor(xs[inside])], axis=1).astype(int)
     if len(cells) == 0:
         return []
@@ -120,6 +125,7 @@ coord_y = st.one_of(st.floats(-3, H + 3, allow_nan=False), st.integers(-2, H + 2
 @settings(max_examples=3000, derandomize=True, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(coord_x, coord_y, coord_x, coord_y)
+@example(-2.7215667277052717, 0.0, 2.0, 0.0)  # x0 + 1.0 * (x1 - x0) rounds below x1 = 2.0
 def test_traverse_covers_dense_sampling(x0, y0, x1, y1):
     check_walk(x0, y0, x1, y1, H, W)
 
@@ -225,3 +231,23 @@ def test_cast_rays_square_room_by_hand():
     diag = cast_rays(grid, Pose2D(1.0, 1.0, 0.0), [math.pi / 4], 5.0)
     np.testing.assert_allclose(diag, [0.9 * math.sqrt(2)], atol=1e-12)
     assert np.isinf(cast_rays(grid, Pose2D(1.0, 1.0, 0.0), [0.0], 0.5))[0]
+
+
+def test_first_hit_axis_aligned_and_limits():
+    data = np.zeros((4, 10), np.int8)
+    data[:, 7] = OCCUPIED
+    data[3, :] = UNKNOWN
+    # Exactly along +x from a cell edge: enters column 7 at t = 7 - 2 = 5.
+    assert k.first_hit(data, 2.0, 1.5, 1.0, 0.0, 20.0, False) == (5.0, k.HIT)
+    # max_len short of the wall: nothing within reach.
+    assert k.first_hit(data, 2.0, 1.5, 1.0, 0.0, 4.5, False) == (4.5, k.NO_HIT)
+    # Along +y (cos exactly 0): unknown row 3 blocks only when asked; else the beam leaves.
+    assert k.first_hit(data, 0.5, 0.25, 0.0, 1.0, 20.0, True) == (2.75, k.HIT)
+    assert k.first_hit(data, 0.5, 0.25, 0.0, 1.0, 20.0, False) == (3.75, k.LEFT_GRID)
+    # Along -x to the left edge.
+    assert k.first_hit(data, 3.5, 0.5, -1.0, 0.0, 20.0, False) == (3.5, k.LEFT_GRID)
+    # Starting outside: walks in from x = 0; blocked at once when unknown blocks.
+    assert k.first_hit(data, -2.0, 1.5, 1.0, 0.0, 20.0, False) == (9.0, k.HIT)
+    assert k.first_hit(data, -2.0, 1.5, 1.0, 0.0, 20.0, True) == (0.0, k.LEFT_GRID)
+    # Starting inside a wall.
+    assert k.first_hit(data, 7.5, 1.5, 1.0, 0.0, 20.0, False) == (0.0, k.HIT)

@@ -72,13 +72,17 @@ def detect_format(path) -> str:
         return "ros2"
     if p.suffix == ".bag":
         raise LogError(f"{p}: not a ROS 1 bag (no '#ROSBAG' header)")
+    if b"\x00" in head or not _is_text(head):
+        raise LogError(f"{p}: neither a ROS bag nor a CARMEN text log")
+    return "carmen"
+
+
+def _is_text(head: bytes) -> bool:
     try:
         head.decode("utf-8")
-    except UnicodeDecodeError:
-        # A multi-byte character cut at the 4096th byte is still text.
-        if b"\x00" in head or len(head) < 4096:
-            raise LogError(f"{p}: neither a ROS bag nor a CARMEN text log") from None
-    return "carmen"
+    except UnicodeDecodeError as e:
+        return e.start >= len(head) - 3  # a multi-byte character cut off by the 4 KB read
+    return True
 
 
 # --- observations from a CARMEN log ------------------------------------------------------------

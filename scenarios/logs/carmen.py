@@ -245,8 +245,9 @@ def _check_trailing(words: list[str], end: int) -> None:
         try:
             float(words[end + 1])
         except ValueError:
-            raise _LineProblem("not a number", f"{words[0]} field {end + 2} (logger timestamp) "
-                                               f"is not a number: {words[end + 1][:40]!r}") from None
+            raise _LineProblem(
+                "not a number", f"{words[0]} field {end + 2} (logger timestamp) is not a "
+                                f"number: {words[end + 1][:40]!r}") from None
 
 
 def _scan(ranges: np.ndarray, angle_min: float, increment: float, range_min: float,

@@ -161,7 +161,11 @@ def bag_poses(path, *, odom_topic=None, pose_topic=None, truth_topic=None, map_f
             amcl.add(r.time, r.pose)
     first_odom = odometry[0] if odometry else None
     odom_frame = odom_frame or (first_odom.frame_id if first_odom else "odom")
-    base_frame = base_frame or (first_odom.child_frame_id if first_odom else "base_link")
+    if base_frame is None:
+        # Without odometry messages the base is odom's one child in tf (base_footprint, ...).
+        children = sorted(c for c, p in tree.parent.items() if p == odom_frame)
+        base_frame = first_odom.child_frame_id if first_odom else \
+            children[0] if len(children) == 1 else "base_link"
     map_frame = map_frame or (amcl_records[0].frame_id if amcl_records else "map")
     # Odometry messages stand in for the odom -> base tf when the bag has no such tf.
     if odometry and tree.parent.get(base_frame) is None:
@@ -182,6 +186,7 @@ def bag_observations(path, poses: BagPoses, *, scan_topics=None, laser_mount=Non
                      strict=False, stats=None):
     """Second pass over a bag: each scan with its poses looked up at its stamp."""
     mounts: dict[str, Pose2D] = {}
+    tree = poses.tree
     for r in read_bag(path, scan_topics=scan_topics, kinds=("scan",), strict=strict,
                       stats=stats):
         t = r.time
@@ -189,7 +194,6 @@ def bag_observations(path, poses: BagPoses, *, scan_topics=None, laser_mount=Non
         if mount is None:
             mount = _mount(poses, r, laser_mount)
             mounts[r.frame_id] = mount
-        tree = poses.tree
         recorded = tree.lookup(poses.map_frame, poses.base_frame, t)
         if recorded is None and tree.parent.get(poses.base_frame) is None:
             recorded = poses.amcl.at(t)  # no odometry to carry the pose: the nearest estimate
@@ -267,7 +271,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
             if (start_time is not None and obs.time < start_time) or \
                     (end_time is not None and obs.time > end_time):
                 continue
-            if source == "localizer" and localizer is None:
+            if source == "localizer" and localizer is None and obs.odom is not None:
                 localizer = _start_localizer(grid, obs, localizer_config, initial_pose,
                                              initial_std, seed)
             sensor = _sensor_pose(obs, source, localizer, counts)
@@ -315,7 +319,7 @@ def _sensor_pose(obs: Observation, source: str, localizer, counts: dict) -> Pose
         return None if obs.recorded is None else obs.recorded.compose(obs.mount)
     if source == "truth":
         return None if obs.truth is None else obs.truth.compose(obs.mount)
-    if obs.odom is None:
+    if obs.odom is None or localizer is None:
         return None
     counts["localizer_updates"] += bool(localizer.update(obs.odom, obs.scan, obs.mount))
     return localizer.estimate().pose_at(obs.odom).compose(obs.mount)

@@ -69,7 +69,7 @@ def _open(path: Path):
 
 
 def bag_topics(path) -> dict[str, str]:
-    """Every topic of a bag and its message type, e.g. ``{"/scan": "sensor_msgs/msg/LaserScan"}``."""
+    """Every topic of a bag and its message type: ``{"/scan": "sensor_msgs/msg/LaserScan"}``."""
     reader = _open(Path(path))
     try:
         return {name: info.msgtype or "?" for name, info in reader.topics.items()}
@@ -374,7 +374,8 @@ class BagWriter:
         n = s.beams
         return self._ts.types[LASER_SCAN](
             header=self._header(r.topic, r.time, r.frame_id),
-            angle_min=float(s.angle_min), angle_max=float(s.angle_min + (n - 1) * s.angle_increment),
+            angle_min=float(s.angle_min),
+            angle_max=float(s.angle_min + (n - 1) * s.angle_increment),
             angle_increment=float(s.angle_increment), time_increment=0.0, scan_time=0.0,
             range_min=float(s.range_min), range_max=float(s.range_max),
             ranges=np.asarray(s.ranges, np.float32), intensities=np.zeros(0, np.float32))

@@ -1,6 +1,5 @@
 """numba kernels of the map metrics. Arrays in, arrays out."""
 
-import numpy as np
 from numba import njit
 
 

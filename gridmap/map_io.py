@@ -106,7 +106,8 @@ def read_map_yaml(path) -> MapMetadata:
     except yaml.YAMLError as e:
         raise MapFileError(f"{path}: not valid YAML ({_one_line(e)})") from None
     if not isinstance(doc, dict):
-        raise MapFileError(f"{path}: expected a mapping of map_server keys, got {type(doc).__name__}")
+        raise MapFileError(f"{path}: expected a mapping of map_server keys, "
+                           f"got {type(doc).__name__}")
     missing = [k for k in REQUIRED_KEYS if k not in doc]
     if missing:
         raise MapFileError(f"{path}: missing key(s) {', '.join(missing)}")
@@ -149,7 +150,8 @@ def read_pgm(path) -> tuple[np.ndarray, int]:
         raise MapFileError(f"{path}: cannot read image ({e})") from None
     magic = raw[:2]
     if magic not in (b"P5", b"P2"):
-        raise MapFileError(f"{path}: bad PGM header: magic number {magic!r}, expected b'P5' or b'P2'")
+        raise MapFileError(f"{path}: bad PGM header: magic number {magic!r}, "
+                           "expected b'P5' or b'P2'")
     fields, pos = _header_fields(raw, path, 3)
     width, height, maxval = fields
     if width <= 0 or height <= 0:

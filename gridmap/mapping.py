@@ -44,7 +44,8 @@ class LogOddsParams:
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not math.isfinite(value):
-                raise GridError(f"log-odds mapping: {f.name} must be a finite number, got {value!r}")
+                raise GridError(f"log-odds mapping: {f.name} must be a finite number, "
+                                f"got {value!r}")
         rules = {
             "hit": (self.hit > 0, "> 0"), "miss": (self.miss < 0, "< 0"),
             "clamp_min": (self.clamp_min < 0, "< 0"), "clamp_max": (self.clamp_max > 0, "> 0"),
@@ -54,7 +55,8 @@ class LogOddsParams:
         }
         for key, (ok, rule) in rules.items():
             if not ok:
-                raise GridError(f"log-odds mapping: {key} must be {rule}, got {getattr(self, key)!r}")
+                raise GridError(f"log-odds mapping: {key} must be {rule}, "
+                                f"got {getattr(self, key)!r}")
 
     @classmethod
     def from_dict(cls, d: dict) -> LogOddsParams:

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import yaml
 
-from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapFileError, OccupancyGrid, load_map, save_map
+from gridmap import (FREE, OCCUPIED, UNKNOWN, GridError, MapFileError, OccupancyGrid, load_map,
+                     save_map)
 from gridmap.map_io import read_map_values, read_pgm
 
 
@@ -137,7 +138,7 @@ def test_png_image(tmp_path):
     assert np.array_equal(load_map(path).data, CELLS)
 
 
-# --- malformed files -------------------------------------------------------------------------------
+# --- malformed files ---------------------------------------------------------------------------
 
 def expect_error(path, *words):
     with pytest.raises(MapFileError) as info:

@@ -162,8 +162,8 @@ def test_traverse_wrapper_converts_metres():
     grid = OccupancyGrid.empty(10, 5, 0.1, origin=(-1.0, 2.0))
     rows, cols = traverse(grid, (-0.95, 2.05), (-0.55, 2.25))
     # grid units (0.5, 0.5) -> (4.5, 2.5), slope 1/2
-    assert list(zip(rows.tolist(), cols.tolist())) == [(0, 0), (0, 1), (1, 1), (1, 2), (1, 3), (2, 3),
-                                                       (2, 4)]
+    walk = list(zip(rows.tolist(), cols.tolist()))
+    assert walk == [(0, 0), (0, 1), (1, 1), (1, 2), (1, 3), (2, 3), (2, 4)]
 
 
 # --- ray casting ---------------------------------------------------------------------------------

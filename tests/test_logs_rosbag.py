@@ -170,6 +170,10 @@ def test_writer_refuses_an_existing_path_and_bad_format(tmp_path):
         BagWriter(tmp_path / "x.bag", "ros1")
     with pytest.raises(LogError, match="'ros1' or 'ros2'"):
         BagWriter(tmp_path / "y", "ros3")
+    with pytest.raises(LogError, match="ends in .bag"):
+        BagWriter(tmp_path / "y", "ros1")
+    with pytest.raises(LogError, match="ends in .bag"):
+        BagWriter(tmp_path / "y.bag", "ros2")
 
 
 def test_not_a_bag_is_a_log_error(tmp_path):
@@ -177,3 +181,13 @@ def test_not_a_bag_is_a_log_error(tmp_path):
     p.write_bytes(b"hello")
     with pytest.raises(LogError, match="not a readable ROS bag"):
         bag_topics(p)
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2"])
+def test_whole_nanosecond_times_read_back_bit_for_bit(tmp_path, fmt):
+    rng = np.random.default_rng(5)
+    times = sorted(round(float(x) * 1e9) / 1e9 for x in rng.uniform(0, 5000, 50))
+    records = [OdomRecord(t, Pose2D(0.0, 0.0, 0.0)) for t in times]
+    path = tmp_path / ("t.bag" if fmt == "ros1" else "t")
+    back = list(read_bag(write_bag(path, records, fmt), kinds=("odom",)))
+    assert [r.time for r in back] == times

@@ -221,7 +221,8 @@ def _pose_record(msg, msgtype: str, topic: str) -> PoseRecord:
 
 
 def _stamp(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
+    # Integer nanoseconds divided once: a time written by ``_ns`` reads back bit for bit.
+    return (int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)) / 1e9
 
 
 def _yaw(q) -> float:
@@ -270,6 +271,10 @@ class BagWriter:
         if storage not in ("sqlite3", "mcap"):
             raise LogError(f"ROS 2 storage must be 'sqlite3' or 'mcap', got {storage!r}")
         self.path = Path(path)
+        if (fmt == "ros1") != (self.path.suffix == ".bag"):
+            # Readers (rosbags', ROS's own) tell ROS 1 from ROS 2 by this suffix.
+            raise LogError(f"{self.path}: a ROS 1 bag's name ends in .bag and a ROS 2 bag's "
+                           f"does not (format {fmt!r})")
         if self.path.exists():
             raise LogError(f"{self.path} exists already; a bag is never overwritten")
         self.fmt = fmt

@@ -10,8 +10,8 @@ Pixel interpretation follows ROS 1 map_server. A pixel's darkness ``occ = 1 - va
 ``free_thresh``; in between it is unknown in ``trinary`` mode and a graded 1..99 in ``scale``
 mode. In ``raw`` mode the 8-bit pixel value is the cell value itself (0..100, anything else
 unknown). :func:`read_map_values` returns those map_server values; :func:`load_map` returns the
-trinary grid this project works with, where a graded cell (neither clearly free nor clearly
-occupied by the file's own thresholds) is unknown.
+trinary grid this project works with: a graded ``scale`` cell is unknown, and a ``raw`` value,
+an occupancy in percent, is compared with the file's thresholds.
 
 Image row 0 is the top of the picture, the highest y; grid row 0 is the lowest y, so rows are
 flipped on the way in and out. Maps are saved as trinary P5 images the way map_saver writes
@@ -72,8 +72,11 @@ def load_map(path) -> OccupancyGrid:
     values, meta = read_map_values(path)
     if meta.mode == "trinary":
         data = values
+    elif meta.mode == "scale":
+        # 1..99 marks pixels between the two thresholds: neither clearly free nor occupied.
+        data = np.where((values > FREE) & (values < OCCUPIED), UNKNOWN, values).astype(np.int8)
     else:
-        # Graded values (scale 1..99, raw 0..100) are thresholded with the file's own thresholds.
+        # Raw values are occupancy in percent: thresholded with the file's own thresholds.
         p = values.astype(np.float64) / 100.0
         data = np.full(values.shape, UNKNOWN, np.int8)
         known = values >= 0

@@ -97,14 +97,15 @@ def test_thresholds_are_strict(tmp_path):
 
 
 def test_scale_mode(tmp_path):
-    path = write_map(tmp_path, [[0, 128, 254]], mode="scale", occupied_thresh=0.9,
+    path = write_map(tmp_path, [[0, 128, 30, 254]], mode="scale", occupied_thresh=0.9,
                      free_thresh=0.1)
     values, meta = read_map_values(path)
-    # 128: occ = 127/255 = 0.498; ratio (0.498 - 0.1) / 0.8 = 0.4975 -> 99 * 0.4975 = 49
+    # 128: occ = 127/255 = 0.498; ratio (0.498 - 0.1) / 0.8 = 0.4975 -> 99 * 0.4975 = 49.
+    # 30: occ = 0.882 -> ratio 0.978 -> 96.
     assert meta.mode == "scale"
-    assert values.tolist() == [[100, 49, 0]]
+    assert values.tolist() == [[100, 49, 96, 0]]
     # The trinary grid keeps only what the file's thresholds call free or occupied.
-    assert load_map(path).data.tolist() == [[OCCUPIED, UNKNOWN, FREE]]
+    assert load_map(path).data.tolist() == [[OCCUPIED, UNKNOWN, UNKNOWN, FREE]]
 
 
 def test_raw_mode(tmp_path):

@@ -245,3 +245,29 @@ def test_user_errors_name_the_problem(world, tmp_path):
     assert s["scans_used"] == 3
     with pytest.raises(LogError, match="pose_source must be one of"):
         update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "x.yaml", pose_source="gps")
+
+
+def test_two_lidars_each_with_its_own_mount(world, tmp_path):
+    """No /scan: every LaserScan topic is read, each scan placed with its own frame's mount
+    (a rear lidar placed with the front mount would contradict the map everywhere)."""
+    d, steps = world
+    rear = Pose2D(-0.2, 0.0, math.pi)
+    world_grid = room([ADDED])
+    recs = [TransformRecord(steps[0][0], "base_link", "laser", MOUNT, static=True),
+            TransformRecord(steps[0][0], "base_link", "rear_laser", rear, static=True)]
+    for t, true, odom, scan in steps:
+        ranges = cast_rays(world_grid, true.compose(rear), scan.angles(), 9.0)
+        back = Scan(ranges.astype(np.float32), scan.angle_min, scan.angle_increment,
+                    scan.range_min, scan.range_max, t)
+        recs += [OdomRecord(t, odom), TransformRecord(t, "odom", "base_link", odom),
+                 TransformRecord(t, "map", "odom", true.compose(odom.inverse())),
+                 ScanRecord(t, scan, topic="/front/scan"),
+                 ScanRecord(t, back, frame_id="rear_laser", topic="/rear/scan")]
+    write_bag(tmp_path / "two", recs, "ros2")
+    s = update_from_log(d / "map.yaml", tmp_path / "two", tmp_path / "two.yaml",
+                        updater_config=NO_GATING, progress=False)
+    assert s["scans_used"] == 2 * len(steps) and s["scans_dropped_as_lost"] == 0
+    out = load_map(tmp_path / "two.yaml")
+    freed, added = changed_right(out)
+    assert freed > 0.5 and added > 0.3
+    assert not np.any(out.data[room([]).data == OCCUPIED] == FREE)

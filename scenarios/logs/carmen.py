@@ -66,6 +66,9 @@ class CarmenLog:
     records: list[Record] = field(default_factory=list)
     stats: ReadStats = field(default_factory=ReadStats)
 
+    def __iter__(self):
+        return iter(self.records)
+
     def scans(self) -> list[ScanRecord]:
         return [r for r in self.records if isinstance(r, ScanRecord)]
 

@@ -187,6 +187,11 @@ def test_state_continues_across_recordings(world, tmp_path):
     assert first["scans_used"] + second["scans_used"] == whole["scans_used"]
     np.testing.assert_array_equal(load_map(tmp_path / "b.yaml").data,
                                   load_map(tmp_path / "w.yaml").data)
+    other = room([REMOVED])
+    save_map(OccupancyGrid(other.data[:, :-4], RES, other.origin), tmp_path / "small.yaml")
+    with pytest.raises(LogError, match="state belongs to a map of shape"):
+        update_from_log(tmp_path / "small.yaml", d / "s.bag", tmp_path / "c.yaml", state,
+                        progress=False)
 
 
 def test_carmen_log_replay(world, tmp_path):

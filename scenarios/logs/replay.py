@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import OCCUPIED, FREE, OccupancyGrid, Pose2D, Scan
+from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D, Scan
 
 from .carmen import read_carmen
 from .frames import PoseTimeline, TransformTree
@@ -280,8 +280,8 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                 continue
             counts["scans_used"] += 1
             report = updater.process(obs.scan, sensor, odometry=obs.odom)
-            counts["scans_processed"] += bool(getattr(report, "processed", True))
-            counts["scans_dropped_as_lost"] += bool(getattr(report, "dropped_as_lost", False))
+            counts["scans_processed"] += bool(report.processed)
+            counts["scans_dropped_as_lost"] += bool(report.dropped_as_lost)
     if counts["scans_used"] == 0:
         raise LogError(f"{log_path}: no scan could be placed ({counts['scans']} read, "
                        f"{counts['scans_without_pose']} without a pose); {stats.summary()}")
@@ -345,8 +345,8 @@ def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
 
     if state_path is not None and Path(state_path).exists():
         upd = MapUpdater.load(state_path)
-        ref = getattr(upd, "reference_map", None)
-        if isinstance(ref, OccupancyGrid) and not ref.same_frame(grid):
+        ref = upd.reference_map
+        if not ref.same_frame(grid):
             raise LogError(f"{state_path}: the saved updater state belongs to a map of shape "
                            f"{ref.shape} at {ref.resolution} m, origin {ref.origin}; the map "
                            f"given has shape {grid.shape} at {grid.resolution} m, origin "

@@ -45,6 +45,20 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_update(args) -> int:
+    from .logs.replay import update_from_log
+
+    summary = update_from_log(args.map, args.log, args.out, args.state,
+                              pose_source=args.poses, updater_config=args.config,
+                              progress=not args.no_progress, log_format=args.format,
+                              scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
+                              pose_topic=args.pose_topic)
+    print(f"wrote {args.out}: {summary['scans_processed']} of {summary['scans']} scans processed, "
+          f"{summary['scans_dropped_as_lost']} dropped as lost, {summary['cells_freed']} cells "
+          f"freed, {summary['cells_occupied']} occupied (poses: {summary['pose_source']})")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mapupdate",
@@ -70,6 +84,24 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("b", type=Path)
     cmp_.set_defaults(func=_cmd_compare)
 
+    upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
+    upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
+    upd.add_argument("--log", type=Path, required=True,
+                     help="ROS 1 bag, ROS 2 bag folder or CARMEN log")
+    upd.add_argument("--out", type=Path, required=True, help="YAML path of the updated map")
+    upd.add_argument("--state", type=Path, default=None,
+                     help="updater state file: loaded if present, saved at the end")
+    upd.add_argument("--poses", default="auto", choices=["auto", "recorded", "localizer", "truth"],
+                     help="where scan poses come from (default: recorded when present)")
+    upd.add_argument("--config", type=Path, default=None, help="updater configuration YAML")
+    upd.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
+                     help="log format (default: detected)")
+    upd.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
+    upd.add_argument("--odom-topic", default=None)
+    upd.add_argument("--pose-topic", default=None)
+    upd.add_argument("--no-progress", action="store_true", help="no progress bar")
+    upd.set_defaults(func=_cmd_update)
+
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
     ren.add_argument("scenario", nargs="?", default=None)
     ren.add_argument("--session", default="W1", help="session name or index (default W1)")
@@ -83,7 +115,8 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     errors: list[type[BaseException]] = [FileNotFoundError, PermissionError, IsADirectoryError]
     for module, name in (("gridmap", "GridError"), ("sim", "ScenarioError"),
                          ("updater", "UpdaterError"), ("localization", "LocalizationError"),
-                         ("scenarios.catalog", "ScenarioNotFound")):
+                         ("scenarios.catalog", "ScenarioNotFound"),
+                         ("scenarios.logs", "LogError")):
         mod = sys.modules.get(module)
         if mod is not None and hasattr(mod, name):
             errors.append(getattr(mod, name))

@@ -1,0 +1,16 @@
+"""The map updater of ALGORITHM.md: keeps an occupancy grid true while the world changes.
+
+Imports nothing of this project but ``gridmap``; numba is imported on first use.
+
+    from updater import MapUpdater, UpdaterConfig
+    updater = MapUpdater(reference_map, UpdaterConfig(gating=True))
+    report = updater.process(scan, sensor_pose, odometry)   # once per scan
+    grid = updater.updated_map()                             # at any time
+"""
+
+from .config import UpdaterConfig, UpdaterError
+from .map_updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, MapUpdater,
+                          ScanReport)
+
+__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "BEAM_INVALID",
+           "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]

@@ -1,0 +1,254 @@
+"""The map updater: a reference map M, per-cell flag buffers, and one call per scan.
+
+State, for an H x W map (nothing else grows with the map):
+
+=================  ==============  ==========================================================
+array              bytes per cell  what
+=================  ==============  ==========================================================
+reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
+buffers            2               uint16 shift registers of the last N_b flags
+decided            1/8             bit per cell: the decision rule says "changed"
+enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
+scan marks         2/8             bits per cell, set and cleared within one scan
+=================  ==============  ==========================================================
+
+A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
+unique with the scan-mark bits (set when a cell is listed, cleared after the push), never by
+zeroing a map-sized array.
+
+Bad input: NaN, inf, negative and zero ranges are invalid beams. A non-finite sensor pose,
+odometry pose or scan time raises ``UpdaterError`` before anything is changed. A sensor pose
+off the map is a counted skip (``ScanReport.reason == "sensor off the map"``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D, Scan
+
+from . import steps
+from .config import UpdaterConfig, UpdaterError
+from .gating import SKIPPED_OFF_MAP, Gate
+
+# Per-beam verdicts (ScanReport.verdicts), the same codes as the kernels use.
+BEAM_INVALID = 0      # not a valid range: no flags
+BEAM_UNCHANGED = 1    # agrees with M: unchanged flags
+BEAM_SKIPPED = 2      # agrees with M but within n_skip beams of a change: no flags
+BEAM_CHANGE = 3       # detected change kept by the run filter: changed flags
+
+STATE_FORMAT = 1
+
+
+@dataclass(frozen=True, eq=False)
+class ScanReport:
+    """What one call of ``MapUpdater.process`` did."""
+
+    time: float                    # [s] the scan's time
+    processed: bool                # False: gated or skipped, see ``reason``
+    reason: str = ""               # why not processed (gating.GATED_*, "sensor off the map")
+    valid_beams: int = 0
+    detected_changes: int = 0      # beams kept as detected changes by the run filter
+    raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
+    changed_flags: int = 0         # cells that got a changed flag
+    new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
+    unchanged_flags: int = 0       # cells that got an unchanged flag
+    changed_cells: int = 0         # cells whose state differs from M, after this scan
+    dropped_as_lost: bool = False  # classified, but too many changes: no flags added
+    verdicts: np.ndarray | None = None   # BEAM_* per beam, None when not classified
+
+    def summary(self) -> dict:
+        """The report without the per-beam verdicts, as plain values."""
+        return {k: v for k, v in vars(self).items() if k != "verdicts"}
+
+
+class MapUpdater:
+    """The map updater of ALGORITHM.md on a fixed reference map.
+
+    ``process(scan, sensor_pose, odometry)`` once per scan; ``updated_map()`` at any time.
+    ``sensor_pose`` is the lidar's pose in the map frame (the robot pose already composed with
+    the lidar's mount); ``odometry`` the robot's odom-frame pose at the scan's time, used for
+    gating only.
+    """
+
+    def __init__(self, reference_map: OccupancyGrid, config: UpdaterConfig | None = None):
+        if not isinstance(reference_map, OccupancyGrid):
+            raise UpdaterError(f"reference_map must be a gridmap.OccupancyGrid, got "
+                               f"{type(reference_map).__name__}")
+        config = UpdaterConfig() if config is None else config
+        if not isinstance(config, UpdaterConfig):
+            raise UpdaterError(f"config must be an UpdaterConfig, got {type(config).__name__}")
+        if reference_map.data.size >= 2**31:
+            raise UpdaterError(f"reference map of shape {reference_map.shape} has too many "
+                               f"cells (at most 2**31 - 1)")
+        self.config = config
+        self._ref = np.ascontiguousarray(reference_map.data, dtype=np.int8).copy()
+        self._ref.flags.writeable = False
+        self._res = reference_map.resolution
+        self._origin = reference_map.origin
+        self._hist = np.zeros(self._ref.shape, np.uint16)
+        n_bytes = (self._ref.size + 7) // 8
+        self._decided = np.zeros(n_bytes, np.uint8)
+        self._ch_marks = np.zeros(n_bytes, np.uint8)
+        self._un_marks = np.zeros(n_bytes, np.uint8)
+        self._enclosed = np.zeros(n_bytes, np.uint8)
+        if config.last_check:
+            max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
+            self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
+        self._n_changed = 0
+        self._gate = Gate(config)
+        self._counts = {"scans": 0, "processed": 0, "gated": 0, "lost": 0, "skipped": 0}
+        self._ws = steps.Workspace()
+
+    # --- the per-scan call --------------------------------------------------------------------
+    def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None
+                ) -> ScanReport:
+        """Gate, classify, flag, push and decide for one scan. See the module docstring for
+        bad input."""
+        self._check_input(scan, sensor_pose, odometry)
+        cfg = self.config
+        self._counts["scans"] += 1
+        t = float(scan.time)
+        gate_pose = sensor_pose if odometry is None else odometry
+        if cfg.gating:
+            reason = self._gate.check(t, gate_pose, odometry is not None)
+            if reason:
+                self._counts["gated"] += 1
+                return ScanReport(t, False, reason, changed_cells=self._n_changed)
+        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
+        height, width = self._ref.shape
+        if not (0 <= sensor[0] < width and 0 <= sensor[1] < height):
+            self._counts["skipped"] += 1
+            return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
+
+        beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
+        report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
+                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
+        if steps.is_lost(beams, cfg):
+            self._counts["lost"] += 1
+            return ScanReport(t, True, changed_cells=self._n_changed, dropped_as_lost=True,
+                              **report)
+        n_ch, n_new = steps.flag_changed_cells(self._ref, beams, sensor, self._res, cfg,
+                                               self._ch_marks, self._ws)
+        n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, cfg, self._un_marks,
+                                          self._ws)
+        hist, ref = self._hist.reshape(-1), self._ref.reshape(-1)
+        n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks,
+                                   self._ws)
+        self._n_changed += steps.decide(hist, ref, self._decided, n_moved, width, cfg, self._ws)
+        if cfg.gating:
+            self._gate.mark_processed(t, gate_pose)
+        self._counts["processed"] += 1
+        return ScanReport(t, True, changed_flags=n_ch, new_obstacle_flags=n_new,
+                          unchanged_flags=n_un, changed_cells=self._n_changed, **report)
+
+    @staticmethod
+    def _check_input(scan, sensor_pose, odometry):
+        if not isinstance(scan, Scan):
+            raise UpdaterError(f"scan must be a gridmap.Scan, got {type(scan).__name__}")
+        if not isinstance(sensor_pose, Pose2D):
+            raise UpdaterError(f"sensor_pose must be a gridmap.Pose2D, got "
+                               f"{type(sensor_pose).__name__}")
+        if not sensor_pose.is_finite():
+            raise UpdaterError(f"sensor pose must be finite, got {sensor_pose}")
+        if odometry is not None and not (isinstance(odometry, Pose2D) and odometry.is_finite()):
+            raise UpdaterError(f"odometry must be None or a finite gridmap.Pose2D, got "
+                               f"{odometry!r}")
+        if not math.isfinite(scan.time):
+            raise UpdaterError(f"scan time must be finite, got {scan.time}")
+
+    # --- results ------------------------------------------------------------------------------
+    @property
+    def reference_map(self) -> OccupancyGrid:
+        """A copy of M."""
+        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
+
+    @property
+    def stats(self) -> dict:
+        """Counts of scans: seen, processed, gated, dropped as lost, skipped (off the map)."""
+        return dict(self._counts)
+
+    def updated_map(self) -> OccupancyGrid:
+        """M with the changed cells flipped and the last check applied (O(map); on demand)."""
+        cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
+                                        self.config.last_check)
+        return OccupancyGrid(cells, self._res, self._origin)
+
+    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the cells the decision rule marks changed, in row-major order.
+        Cells drawn by the last check are not among them (see ``updated_map``)."""
+        bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
+        return np.unravel_index(np.flatnonzero(bits), self._ref.shape)
+
+    @property
+    def n_changed(self) -> int:
+        return self._n_changed
+
+    def change_counts(self) -> np.ndarray:
+        """n_c, the changed flags in each cell's buffer, as a uint8 (H, W) array."""
+        return np.bitwise_count(self._hist & steps.buffer_mask(self.config)).astype(np.uint8)
+
+    def enclosed_unknown(self) -> np.ndarray:
+        """Boolean (H, W) mask of the cells the last check may close."""
+        bits = np.unpackbits(self._enclosed, bitorder="little")[:self._ref.size]
+        return bits.reshape(self._ref.shape).astype(bool)
+
+    def state_nbytes(self) -> int:
+        """Bytes of every array the updater holds, the per-scan workspace included."""
+        arrays = (self._ref, self._hist, self._decided, self._ch_marks, self._un_marks,
+                  self._enclosed)
+        return sum(a.nbytes for a in arrays) + self._ws.nbytes()
+
+    # --- stop and resume ----------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (npz): written to a temporary file beside it and
+        renamed, so a crash never leaves a half-written state."""
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
+                "resolution": self._res, "origin": list(self._origin),
+                "gate": self._gate.state(), "counts": self._counts}
+        try:
+            with open(tmp, "wb") as f:
+                np.savez_compressed(f, meta=np.array(json.dumps(meta)), reference=self._ref,
+                                    hist=self._hist)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except OSError as e:
+            tmp.unlink(missing_ok=True)
+            raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
+
+    @classmethod
+    def load(cls, path) -> MapUpdater:
+        """An updater in exactly the state ``save`` wrote."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                ref, hist = z["reference"], z["hist"]
+        except (OSError, KeyError, ValueError) as e:
+            raise UpdaterError(f"{path}: not a readable updater state file: {e}") from None
+        if meta.get("format") != STATE_FORMAT:
+            raise UpdaterError(f"{path}: state format {meta.get('format')!r}, expected "
+                               f"{STATE_FORMAT}")
+        config = UpdaterConfig.from_dict(meta["config"], source=str(path))
+        updater = cls(OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"])), config)
+        if hist.shape != ref.shape or hist.dtype != np.uint16 or \
+                np.any(hist & ~np.uint16(steps.buffer_mask(config))):
+            raise UpdaterError(f"{path}: buffers do not fit the reference map and config")
+        updater._hist[...] = hist
+        updater._decided, updater._n_changed = steps.decide_all(
+            updater._hist.reshape(-1), updater._ref.reshape(-1), ref.shape[1], config)
+        try:
+            updater._gate.restore(meta["gate"])
+        except ValueError as e:
+            raise UpdaterError(f"{path}: {e}") from None
+        updater._counts = {k: int(meta["counts"][k]) for k in updater._counts}
+        return updater

@@ -1,0 +1,21 @@
+"""The simulated warehouse: a pymunk world of walls, racks, movable objects and walking people,
+a differential-drive robot with drifting odometry and exact 2D lidars, and the ground-truth map
+of every session. Imports ``gridmap`` only, never the robot software.
+
+    scenario = load_scenario("scenarios/aws_small_warehouse.yaml")
+    world = World(scenario, "W2", seed=7)
+    for msg in world.run():          # OdometryMsg and ScanMsg in time order
+        ...
+    truth = world.ground_truth()     # G in grid_frame(scenario)
+"""
+
+from .groundtruth import grid_frame
+from .drawing import render_world
+from .scenario import (Change, LidarSpec, Obstacle, PersonSpec, RobotSpec, Scenario,
+                       ScenarioError, SessionSpec, WorldSpec, load_scenario, quick_variant,
+                       scenario_from_dict)
+from .world import OdometryMsg, ScanMsg, World
+
+__all__ = ["Change", "LidarSpec", "Obstacle", "OdometryMsg", "PersonSpec", "RobotSpec",
+           "ScanMsg", "Scenario", "ScenarioError", "SessionSpec", "World", "WorldSpec",
+           "grid_frame", "load_scenario", "quick_variant", "render_world", "scenario_from_dict"]

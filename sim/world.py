@@ -1,0 +1,296 @@
+"""The simulated world of one session: objects, walls, people, the robot, its odometry and lidars.
+
+``World(scenario, session, seed).run()`` steps the physics at a fixed rate and yields, in time
+order, an ``OdometryMsg`` at each odometry tick and a ``ScanMsg`` per lidar at each of its ticks,
+until the robot has driven its route. Messages that fall inside a physics step see the state at
+their own time: the robot's arc is exact and people move in straight lines within a step. At a
+shared time the odometry message comes first, then the lidars in order.
+
+Randomness: one ``numpy.random.Generator`` per component (people, odometry, each lidar, and the
+on-demand noisy scans), all derived from the seed and the session index through
+``numpy.random.SeedSequence``; the same seed gives the same messages, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D, Scan
+
+from . import geometry as geo
+from . import lidar as lid
+from .groundtruth import grid_frame, rasterise
+from .odometry import Odometry
+from .people import People
+from .robot import RouteFollower, integrate
+from .scenario import Scenario, ScenarioError
+
+PERSON_MASS = 70.0        # [kg]
+COLLISION_SLOP = 0.002    # [m] overlap the physics engine tolerates between bodies
+_PEOPLE, _ODOMETRY, _EXTRA, _LIDAR0 = 0, 1, 2, 3   # component numbers in the seed tree
+_NOBODY = np.zeros((0, 3))
+
+
+@dataclass(frozen=True)
+class OdometryMsg:
+    time: float          # [s]
+    pose: Pose2D         # robot in the odom frame: noisy, drifting
+    true_pose: Pose2D    # robot in the map frame
+
+
+@dataclass(frozen=True)
+class ScanMsg:
+    time: float
+    lidar: int           # index into scenario.robot.lidars
+    scan: Scan
+    true_pose: Pose2D    # robot (not sensor) in the map frame at the scan time
+    odom_pose: Pose2D    # robot in the odom frame at the scan time
+
+
+def _child(ss: np.random.SeedSequence, key: int) -> np.random.SeedSequence:
+    # Built from the spawn key rather than by spawn(), which counts children on the parent
+    # object: a caller handing us the same SeedSequence twice must get the same streams.
+    return np.random.SeedSequence(ss.entropy, spawn_key=tuple(ss.spawn_key) + (key,),
+                                  pool_size=ss.pool_size)
+
+
+class World:
+    """One session's world. ``session`` is an index (0 = first) or a name; its world has the
+    changes of every session up to and including it applied in order."""
+
+    def __init__(self, scenario: Scenario, session: int | str = 0,
+                 seed: int | np.random.SeedSequence | None = None):
+        self.scenario = scenario
+        self.index = scenario.session_index(session)
+        self.session = scenario.sessions[self.index]
+        bounds, thick = scenario.world.bounds, scenario.world.wall_thickness
+        self.obstacles = scenario.obstacles(self.index)
+        self.boxes, self.circles = geo.obstacle_arrays(self.obstacles, bounds, thick)
+        self.segments = geo.box_segments(self.boxes)
+        root = seed if isinstance(seed, np.random.SeedSequence) else \
+            np.random.SeedSequence(scenario.seed if seed is None else int(seed))
+        ss = _child(root, self.index)
+        rng = [np.random.default_rng(_child(ss, k))
+               for k in range(_LIDAR0 + len(scenario.robot.lidars))]
+        self._lidar_rngs = rng[_LIDAR0:]
+        self._extra_rng = rng[_EXTRA]
+        robot = scenario.robot
+        start = robot.start
+        self._pose = np.array([start.x, start.y, start.theta])
+        self.crowd = People(self.session.people, self.boxes, self.circles,
+                            np.array([start.x, start.y, robot.radius + 0.5]), rng[_PEOPLE])
+        self.follower = RouteFollower(
+            np.vstack([[start.x, start.y], np.asarray(self.session.route, np.float64)]),
+            robot.max_speed, robot.max_turn_rate, robot.max_accel, robot.radius)
+        self.odometry = Odometry(start, robot.odometry_noise, rng[_ODOMETRY])
+        self._time = 0.0
+        self._true = start
+        self._odom = start
+        self._people_now = self.crowd.discs()
+        self.finished = False       # the route was driven to its end
+        self.pushes = 0             # exact pushes of people out of objects (should stay rare)
+        self._started = False
+
+    # --- state ------------------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        """[s] time of the latest message (0 before the first)."""
+        return self._time
+
+    @property
+    def true_pose(self) -> Pose2D:
+        return self._true
+
+    @property
+    def odom_pose(self) -> Pose2D:
+        return self._odom
+
+    def people(self) -> np.ndarray:
+        """(N, 3) x, y, radius of every person at the latest message's time."""
+        return self._people_now.copy()
+
+    # --- truth --------------------------------------------------------------------------------------
+    def ground_truth(self) -> OccupancyGrid:
+        """G of this session's world in ``grid_frame(scenario)``; people are never part of it."""
+        st = self.scenario.robot.start
+        return rasterise(grid_frame(self.scenario), self.boxes, self.circles,
+                         self.scenario.world.bounds, (st.x, st.y))
+
+    def scan_without_people(self, robot_pose: Pose2D, lidar: int = 0, noise: bool = False) -> Scan:
+        """The scan lidar ``lidar`` would take from ``robot_pose`` (map frame) in this world
+        without people; noise-free unless ``noise`` (drawn from a stream of its own)."""
+        ranges = self.scans_without_people(robot_pose.as_array()[None], lidar, noise)[0]
+        return lid.make_scan(ranges, self.scenario.robot.lidars[lidar], self._time)
+
+    def scans_without_people(self, robot_poses: np.ndarray, lidar: int = 0,
+                             noise: bool = False) -> np.ndarray:
+        """Ranges (N, beams) float32 of lidar ``lidar`` from robot poses (N, 3) in this world
+        without people; inf for no return."""
+        spec = self.scenario.robot.lidars[lidar]
+        sensors = lid.sensor_poses(robot_poses, spec.mount)
+        exact = lid.cast_ranges(sensors, spec, self.segments, self.circles)
+        return lid.measure(exact, spec, self._extra_rng if noise else None)
+
+    # --- running ------------------------------------------------------------------------------------
+    def run(self):
+        """Step the world and yield ``OdometryMsg`` and ``ScanMsg`` in time order until the robot
+        has finished its route (or the session's ``max_duration`` has passed)."""
+        if self._started:
+            raise RuntimeError("World.run() can be called once; make a new World to replay")
+        self._started = True
+        physics = _Physics(self)
+        robot = self.scenario.robot
+        dt = 1.0 / self.scenario.physics_hz
+        rates = [robot.odometry_rate_hz] + [ld.rate_hz for ld in robot.lidars]
+        ticks = [0] * len(rates)
+        due = [0.0] * len(rates)
+        limit = self.session.max_duration or self._default_duration()
+        step = 0
+        while True:
+            t0, t1 = step * dt, (step + 1) * dt
+            pose0, people0 = self._pose, self.crowd.pos.copy()
+            v, w = self.follower.command(pose0, self.crowd.discs() if len(self.crowd)
+                                         else _NOBODY, dt)
+            if len(self.crowd):
+                robot_disc = np.array([pose0[0], pose0[1], robot.radius])
+                physics.set_people_velocities(self.crowd.wished_velocities(robot_disc, dt))
+            self._pose = integrate(pose0, v, w, dt)
+            physics.step(dt, pose0, self._pose, v, w)
+            if len(self.crowd):
+                physics.read_people(self.crowd.pos, self.crowd.vel)
+                self._keep_people_out(physics)
+            while True:   # every message due by the end of this step, earliest first
+                j = min(range(len(rates)), key=due.__getitem__)
+                if due[j] > t1 + 1e-9:
+                    break
+                t = due[j]
+                ticks[j] += 1
+                due[j] = ticks[j] / rates[j]
+                s = min(max((t - t0) / dt, 0.0), 1.0)
+                yield self._message(j, t, integrate(pose0, v, w, s * dt),
+                                    people0 + s * (self.crowd.pos - people0))
+            step += 1
+            done = self.follower.done and self.follower.v == 0.0 and self.follower.w == 0.0
+            if done or t1 >= limit:
+                self.finished = done
+                if not done:
+                    warnings.warn(f"{self.scenario.name}/{self.session.name}: the robot did not "
+                                  f"finish its route within {limit:.0f} s", RuntimeWarning,
+                                  stacklevel=2)
+                return
+
+    def _default_duration(self) -> float:
+        pts = self.follower.waypoints
+        length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+        return 3.0 * length / self.scenario.robot.max_speed + 10.0 * len(pts) + 60.0
+
+    def _message(self, j: int, t: float, pose: np.ndarray, people_xy: np.ndarray):
+        true = Pose2D(float(pose[0]), float(pose[1]), float(pose[2]))
+        self._time = t
+        self._true = true
+        if len(self.crowd):
+            self._people_now = np.column_stack([people_xy, self.crowd.radius])
+        if j == 0:
+            self._odom = self.odometry.tick(true)
+            return OdometryMsg(t, self._odom, true)
+        k = j - 1
+        spec = self.scenario.robot.lidars[k]
+        self._odom = self.odometry.pose_at(true)
+        sensors = lid.sensor_poses(pose[None], spec.mount)
+        circles = np.concatenate([self.circles, self._people_now]) if len(self.crowd) \
+            else self.circles
+        exact = lid.cast_ranges(sensors, spec, self.segments, circles)[0]
+        scan = lid.make_scan(lid.measure(exact, spec, self._lidar_rngs[k]), spec, t)
+        return ScanMsg(t, k, scan, true, self._odom)
+
+    def _keep_people_out(self, physics) -> None:
+        """The physics engine allows a little overlap; push anyone inside an object exactly
+        clear of it and tell the engine."""
+        before = self.crowd.pos.copy()
+        pushes = self.crowd.keep_out()
+        if pushes:
+            self.pushes += pushes
+            moved = np.nonzero((self.crowd.pos != before).any(axis=1))[0]
+            physics.place_people(moved, self.crowd.pos[moved])
+
+
+class _Physics:
+    """The pymunk space of a world: static walls and objects, the robot as a kinematic disc
+    (it pushes, nothing pushes it), and a dynamic disc per person."""
+
+    def __init__(self, world: World):
+        import pymunk
+        import pymunk.batch
+
+        self.space = space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.collision_slop = COLLISION_SLOP
+        for corners in geo.box_corners(world.boxes):
+            self._add_static(pymunk.Poly(space.static_body, [tuple(map(float, c))
+                                                             for c in corners]))
+        for x, y, r in world.circles:
+            self._add_static(pymunk.Circle(space.static_body, float(r), (float(x), float(y))))
+        self.robot = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        self.robot.position = (float(world._pose[0]), float(world._pose[1]))
+        self.robot.angle = float(world._pose[2])
+        shape = pymunk.Circle(self.robot, world.scenario.robot.radius)
+        shape.friction = 0.0
+        space.add(self.robot, shape)
+        self.people = []
+        for (x, y), r in zip(world.crowd.pos, world.crowd.radius):
+            body = pymunk.Body(PERSON_MASS, math.inf)
+            body.position = (float(x), float(y))
+            shape = pymunk.Circle(body, float(r))
+            shape.friction = 0.0
+            space.add(body, shape)
+            self.people.append(body)
+        # people's state is read back in one batched call rather than attribute by attribute
+        self._batch = pymunk.batch
+        self._fields = pymunk.batch.BodyFields.BODY_ID | pymunk.batch.BodyFields.POSITION \
+            | pymunk.batch.BodyFields.VELOCITY
+        self._buffer = pymunk.batch.Buffer()
+        self._ids = np.array([b.id for b in self.people], np.uintp)
+        self._order = None
+        self._order_key = b""
+
+    def _add_static(self, shape) -> None:
+        shape.friction = 0.0
+        self.space.add(shape)
+
+    def set_people_velocities(self, v: np.ndarray) -> None:
+        for body, (vx, vy) in zip(self.people, v.tolist()):
+            body.velocity = (vx, vy)
+
+    def step(self, dt: float, pose0, pose1, v: float, w: float) -> None:
+        """Advance by ``dt`` with the robot moving from ``pose0`` to ``pose1`` (its exact arc;
+        the engine only needs its velocity to push people out of its way)."""
+        self.robot.velocity = (v * math.cos(pose0[2]), v * math.sin(pose0[2]))
+        self.robot.angular_velocity = w
+        self.space.step(dt)
+        self.robot.position = (float(pose1[0]), float(pose1[1]))
+        self.robot.angle = float(pose1[2])
+
+    def read_people(self, pos: np.ndarray, vel: np.ndarray) -> None:
+        buf = self._buffer
+        buf.clear()
+        self._batch.get_space_bodies(self.space, self._fields, buf)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp)
+        state = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 4)
+        key = ids.tobytes()
+        if key != self._order_key:    # the engine's body order changes only on add or remove
+            row = {int(b): k for k, b in enumerate(ids)}
+            self._order = np.array([row[int(b)] for b in self._ids], np.int64)
+            self._order_key = key
+        pos[:] = state[self._order, :2]
+        vel[:] = state[self._order, 2:]
+
+    def place_people(self, idx, xy: np.ndarray) -> None:
+        for i, (x, y) in zip(idx, xy.tolist()):
+            self.people[i].position = (x, y)
+
+
+__all__ = ["OdometryMsg", "ScanMsg", "World", "ScenarioError", "grid_frame"]

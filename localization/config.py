@@ -1,0 +1,142 @@
+"""The localiser's configuration: one frozen dataclass, defaults of ROS 2 nav2 AMCL.
+
+Keys carry nav2's parameter names, so a nav2 ``amcl`` parameter block can be copied across; keys
+that nav2 does not have are marked below. Loading refuses unknown keys with the nearest valid name.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+
+class LocalizationError(ValueError):
+    """A localiser argument, configuration or call that cannot be used; the message names it."""
+
+
+RESAMPLERS = ("systematic", "stratified", "residual", "multinomial")
+MODELS = ("likelihood_field", "likelihood_field_prob")
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    # Odometry motion model (sample_motion_model_odometry), variances as in nav2:
+    alpha1: float = 0.2      # rotation noise from rotation
+    alpha2: float = 0.2      # rotation noise from translation
+    alpha3: float = 0.2      # translation noise from translation
+    alpha4: float = 0.2      # translation noise from rotation
+    # Likelihood-field sensor model: nav2's laser_model_type "likelihood_field" (AMCL's
+    # 1 + sum pz^3) or "likelihood_field_prob" (the product of pz^importance_factor). Both
+    # defaults differ from nav2 (likelihood_field, 1.0); localization/README.md gives the
+    # measurements behind them.
+    laser_model_type: str = "likelihood_field_prob"
+    importance_factor: float = 0.3
+    min_ess_fraction: float = 0.02           # adaptive tempering floor, 0: off (not in nav2)
+    laser_likelihood_max_dist: float = 2.0   # [m] distance field cap
+    laser_min_range: float = -1.0            # [m] <= 0: the scan's range_min
+    laser_max_range: float = -1.0            # [m] <= 0: the scan's range_max
+    z_hit: float = 0.5
+    z_rand: float = 0.5
+    sigma_hit: float = 0.2                   # [m]
+    max_beams: int = 60
+    # KLD-sampling:
+    min_particles: int = 500
+    max_particles: int = 2000
+    pf_err: float = 0.05
+    pf_z: float = 0.99       # used as the normal quantile itself, exactly as nav2 does
+    kld_bin_xy: float = 0.5                  # [m]     (not in nav2: AMCL's fixed kd-tree bins)
+    kld_bin_theta: float = math.radians(10)  # [rad]   (not in nav2)
+    # Filter schedule:
+    update_min_d: float = 0.25               # [m]
+    update_min_a: float = 0.2                # [rad]
+    resample_interval: int = 1
+    # Augmented MCL recovery: 0 / 0 is off (nav2's default); e.g. 0.001 / 0.1 for kidnapping.
+    recovery_alpha_slow: float = 0.0
+    recovery_alpha_fast: float = 0.0
+    resampler: str = "systematic"            # (not in nav2, whose sampler is multinomial)
+
+    def __post_init__(self):
+        for name in ("alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand",
+                     "recovery_alpha_slow", "recovery_alpha_fast", "pf_z", "min_ess_fraction",
+                     "update_min_d", "update_min_a"):
+            _check(name, getattr(self, name), lambda v: v >= 0, "a number >= 0")
+        for name in ("laser_likelihood_max_dist", "sigma_hit", "pf_err", "kld_bin_xy",
+                     "importance_factor",
+                     "kld_bin_theta"):
+            _check(name, getattr(self, name), lambda v: v > 0, "a number > 0")
+        for name in ("laser_min_range", "laser_max_range"):
+            _check(name, getattr(self, name), lambda v: True, "a number")
+        for name in ("max_beams", "min_particles", "max_particles", "resample_interval"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise LocalizationError(f"config key '{name}' must be an integer >= 1, got {v!r}")
+        if self.max_beams < 2:
+            raise LocalizationError("config key 'max_beams' must be >= 2 (AMCL's minimum)")
+        if self.min_particles > self.max_particles:
+            raise LocalizationError(f"config key 'min_particles' ({self.min_particles}) exceeds "
+                                    f"'max_particles' ({self.max_particles})")
+        if self.z_hit + self.z_rand <= 0:
+            raise LocalizationError("config keys 'z_hit' and 'z_rand' must not both be 0")
+        for name in ("recovery_alpha_slow", "recovery_alpha_fast", "min_ess_fraction"):
+            if getattr(self, name) > 1:
+                raise LocalizationError(f"config key '{name}' must be <= 1")
+        if self.laser_model_type not in MODELS:
+            raise LocalizationError(f"config key 'laser_model_type' must be one of {MODELS}, "
+                                    f"got {self.laser_model_type!r}")
+        if self.resampler not in RESAMPLERS:
+            raise LocalizationError(f"config key 'resampler' must be one of {RESAMPLERS}, "
+                                    f"got {self.resampler!r}")
+
+    @property
+    def alphas(self) -> tuple[float, float, float, float]:
+        return self.alpha1, self.alpha2, self.alpha3, self.alpha4
+
+    @property
+    def recovery_enabled(self) -> bool:
+        return self.recovery_alpha_slow > 0 and self.recovery_alpha_fast > 0
+
+    @classmethod
+    def from_dict(cls, values: dict, source: str = "config") -> LocalizerConfig:
+        """Build from a mapping; an unknown key is refused with the nearest valid name."""
+        if not isinstance(values, dict):
+            raise LocalizationError(f"{source}: expected a mapping of keys, got {type(values).__name__}")
+        known = [f.name for f in fields(cls)]
+        for key in values:
+            if key not in known:
+                near = difflib.get_close_matches(str(key), known, n=1)
+                hint = f" (did you mean '{near[0]}'?)" if near else ""
+                raise LocalizationError(f"{source}: unknown key '{key}'{hint}")
+        kwargs = {}
+        for f in fields(cls):
+            if f.name in values:
+                v = values[f.name]
+                # YAML writes 2 for 2.0: accept ints where floats are expected, nothing looser.
+                if f.type == "float" and isinstance(v, int) and not isinstance(v, bool):
+                    v = float(v)
+                kwargs[f.name] = v
+        try:
+            return cls(**kwargs)
+        except LocalizationError as e:
+            raise LocalizationError(f"{source}: {e}") from None
+
+    @classmethod
+    def from_yaml(cls, path) -> LocalizerConfig:
+        """Load from a YAML file holding the keys at the top level (or under ``localization:``)."""
+        import yaml
+
+        path = Path(path)
+        try:
+            values = yaml.safe_load(path.read_text()) or {}
+        except (OSError, yaml.YAMLError) as e:
+            raise LocalizationError(f"{path}: cannot read the localiser configuration: {e}") from None
+        if isinstance(values, dict) and set(values) == {"localization"}:
+            values = values["localization"] or {}
+        return cls.from_dict(values, source=str(path))
+
+
+def _check(name, value, ok, what):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not ok(value):
+        raise LocalizationError(f"config key '{name}' must be {what}, got {value!r}")

@@ -23,6 +23,7 @@ SOCIAL_PARAMS = np.array([0.5, 3.0, 0.3, 4.0, 0.12, 4.0, 0.4, 0.35, 2.0])
 GOAL_REACHED = 0.3        # [m]
 STUCK_AFTER = 6.0         # [s] without getting 0.5 m closer to the goal
 SPEED_CAP = 1.3           # a person never goes faster than this times their preferred speed
+_NO_BOXES = np.zeros((0, 5))
 
 
 @dataclass
@@ -183,8 +184,11 @@ class People:
             self.update_goals()
         return out
 
-    def keep_out(self) -> int:
-        """Push everyone exactly clear of objects; returns how many pushes it took."""
+    def keep_out(self, robot_disc: np.ndarray) -> int:
+        """Push everyone exactly clear of the robot (1, 3), then of the objects; returns how
+        many pushes it took."""
         if not len(self):
             return 0
-        return int(_kernels().keep_out(self.pos, self.radius, self.boxes, self.circles, 0.0))
+        k = _kernels()
+        return int(k.keep_out(self.pos, self.radius, _NO_BOXES, robot_disc, 0.0)
+                   + k.keep_out(self.pos, self.radius, self.boxes, self.circles, 0.0))

@@ -92,7 +92,7 @@ class World:
         self._odom = start
         self._people_now = self.crowd.discs()
         self.finished = False       # the route was driven to its end
-        self.pushes = 0             # exact pushes of people out of objects (should stay rare)
+        self.pushes = 0             # exact pushes of people out of the robot or objects
         self._started = False
 
     # --- state ------------------------------------------------------------------------------------
@@ -162,7 +162,7 @@ class World:
             physics.step(dt, pose0, self._pose, v, w)
             if len(self.crowd):
                 physics.read_people(self.crowd.pos, self.crowd.vel)
-                self._keep_people_out(physics)
+                self._keep_people_out(physics, self._pose)
             while True:   # every message due by the end of this step, earliest first
                 j = min(range(len(rates)), key=due.__getitem__)
                 if due[j] > t1 + 1e-9:
@@ -207,11 +207,11 @@ class World:
         scan = lid.make_scan(lid.measure(exact, spec, self._lidar_rngs[k]), spec, t)
         return ScanMsg(t, k, scan, true, self._odom)
 
-    def _keep_people_out(self, physics) -> None:
-        """The physics engine allows a little overlap; push anyone inside an object exactly
-        clear of it and tell the engine."""
+    def _keep_people_out(self, physics, pose) -> None:
+        """The physics engine allows a little overlap; push anyone inside the robot or an object
+        exactly clear of it (objects last: they win) and tell the engine."""
         before = self.crowd.pos.copy()
-        pushes = self.crowd.keep_out()
+        pushes = self.crowd.keep_out(np.array([[pose[0], pose[1], self.scenario.robot.radius]]))
         if pushes:
             self.pushes += pushes
             moved = np.nonzero((self.crowd.pos != before).any(axis=1))[0]

@@ -50,6 +50,7 @@ class Workspace:
         self._virtual = 0
         self._walk = 0
         self._flags = 0
+        self._moved = 0
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:
@@ -77,7 +78,11 @@ class Workspace:
             self._flags = capacity
             self.changed = np.zeros(capacity, np.int32)
             self.unchanged = np.zeros(capacity, np.int32)
-            self.moved = np.zeros(2 * capacity, np.int32)
+
+    def for_moved(self, capacity: int) -> None:
+        if capacity > self._moved:
+            self._moved = int(capacity * 1.25) + 64
+            self.moved = np.zeros(self._moved, np.int32)
 
     def nbytes(self) -> int:
         return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
@@ -168,6 +173,7 @@ def push_flags(hist_flat: np.ndarray, n_changed: int, n_unchanged: int, cfg: Upd
     """Shift the scan's flags into the cells' buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``. Only flagged cells are touched. Returns
     the count of entries written to ``ws.moved`` (cells whose count n_c changed)."""
+    ws.for_moved(n_changed + n_unchanged)
     return kernels().push_flags(hist_flat, ws.changed, n_changed, ws.unchanged, n_unchanged,
                                 buffer_mask(cfg), cfg.threshold, ch_marks, un_marks, ws.moved)
 

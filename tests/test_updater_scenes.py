@@ -1,0 +1,218 @@
+"""The updater in synthetic rooms: a 10 x 10 m room mapped at 5 cm, scans ray-cast from the true
+geometry, the robot circling at 0.5 m/s with 10 Hz scans, sensor poses with 2 cm / 1 deg noise
+(seeded), smooth odometry for gating. Default configuration unless a test says otherwise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gridmap import FREE, OCCUPIED, UNKNOWN, Pose2D
+from gridmap.raycast import traverse
+from updater import MapUpdater, UpdaterConfig
+
+try:
+    import test_updater_world as world
+except ImportError:  # tests collected as a package
+    from tests import test_updater_world as world
+
+Circle, Drive, Rect = world.Circle, world.Drive, world.Rect
+
+T = UpdaterConfig().threshold
+# Box faces lie a quarter cell inside their edge cells, so every edge cell is mostly box.
+BOX = Rect(4.9125, 5.1125, 6.1125, 5.9125)          # 1.2 x 0.8 m, inside the robot's circle
+
+
+def drive(ref, shapes, config=None, seconds=80.0, seed=0, each=None, offset=None):
+    """Run the updater along the circle; ``shapes(t)`` or a fixed list is the world. Returns the
+    updater and, per cell, how many processed scans hit it / saw it (true geometry)."""
+    updater = MapUpdater(ref, config)
+    hits = np.zeros(ref.shape, int)
+    seen = np.zeros(ref.shape, int)
+    for true, noisy, t in Drive(seconds=seconds, seed=seed).steps():
+        scan = world.full_scan(shapes(t) if callable(shapes) else shapes, true, t)
+        pose = noisy if offset is None else offset(noisy)
+        report = updater.process(scan, pose, odometry=true)
+        if each is not None:
+            each(updater, report)
+        if report.processed and not report.dropped_as_lost:
+            _count_views(ref, scan, true, hits, seen)
+    return updater, hits, seen
+
+
+def _count_views(ref, scan, pose, hits, seen):
+    hx, hy = world.hit_points(scan, pose)
+    rows, cols = ref.world_to_cell(hx, hy)
+    np.add.at(hits, (rows, cols), 1)
+    crossed = np.zeros(ref.shape, bool)
+    for x, y in zip(hx, hy):
+        d = math.hypot(x - pose.x, y - pose.y)
+        if d > 0.3:      # crossed cells, short of the hit by the removed-obstacle skip
+            f = (d - 0.2) / d
+            r, c = traverse(ref, (pose.x, pose.y), (pose.x + f * (x - pose.x),
+                                                    pose.y + f * (y - pose.y)))
+            crossed[r, c] = True
+    seen += crossed
+
+
+def wall_watch(wall_mask):
+    """A per-scan check that no cell of ``wall_mask`` is ever changed."""
+    worst = [0]
+
+    def each(updater, report):
+        if report.processed:
+            rows, cols = updater.changed_cells()
+            worst[0] = max(worst[0], int(wall_mask[rows, cols].sum()))
+    return each, worst
+
+
+def test_removed_box_is_freed_and_no_wall_cell_ever_is():
+    walls = world.room_walls()
+    ref = world.rasterise(walls, hollow=[BOX])
+    box = world.cells_of(BOX)
+    each, worst = wall_watch((ref.data == OCCUPIED) & ~box)
+    updater, hits, seen = drive(ref, walls, each=each)
+    out = updater.updated_map().data
+    outline = box & (ref.data == OCCUPIED) & (seen >= T)
+    assert outline.sum() > 0.9 * (box & (ref.data == OCCUPIED)).sum()
+    assert (out[outline] == FREE).mean() >= 0.99
+    assert (out[box] == FREE).all()                 # the unknown interior was seen through
+    assert worst[0] == 0
+    rows, cols = updater.changed_cells()
+    assert box[rows, cols].all()                    # nothing changed anywhere else
+    assert updater.stats["processed"] > 60 and updater.stats["lost"] == 0
+
+
+def test_added_box_appears_and_no_wall_cell_is_freed():
+    walls = world.room_walls()
+    ref = world.rasterise(walls)
+    box = world.cells_of(BOX)
+    each, worst = wall_watch(ref.data == OCCUPIED)
+    updater, hits, seen = drive(ref, walls + [BOX], each=each)
+    out = updater.updated_map().data
+    facing = box & (hits >= T)          # cells that held a true hit in at least T scans
+    assert facing.sum() >= 60
+    assert (out[facing] == OCCUPIED).mean() >= 0.95
+    assert worst[0] == 0
+    # New cells hug the box: within one cell of it (noisy hits land just in front of a face).
+    new = (ref.data == FREE) & (out == OCCUPIED)
+    near = np.zeros_like(box)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            near |= np.roll(np.roll(box, dr, 0), dc, 1)
+    assert new[~near].sum() == 0
+
+
+def walker(speed):
+    a, b = np.array([1.5, 2.0]), np.array([9.5, 9.0])
+    length = float(np.linalg.norm(b - a))
+
+    def at(t):
+        s = (speed * t) % (2 * length)
+        q = a + (b - a) * (s if s < length else 2 * length - s) / length
+        return world.room_walls() + [Circle(float(q[0]), float(q[1]), 0.2)]
+    return at
+
+
+def test_walking_person_leaves_no_occupied_cell_with_default_gating():
+    ref = world.rasterise(world.room_walls())
+    worst = [0]
+
+    def each(updater, report):
+        worst[0] = max(worst[0], report.changed_cells)
+    for speed in (1.0, 0.3):
+        updater, _, _ = drive(ref, walker(speed), each=each)
+        assert ((ref.data == FREE) & (updater.updated_map().data == OCCUPIED)).sum() == 0
+        assert worst[0] == 0
+    # Without gating, a slow walker does make cells change for a while: gating is what helps.
+    updater, _, _ = drive(ref, walker(0.3), UpdaterConfig(gating=False), seconds=40, each=each)
+    assert worst[0] > 0
+
+
+def test_scans_off_by_half_a_metre_and_ten_degrees_are_dropped_and_change_nothing():
+    walls = world.room_walls()
+    shapes = walls + [BOX]
+    ref = world.rasterise(walls, hollow=[BOX])
+    # The default lost_fraction (0.8) catches gross errors only: in this room 0.5 m / 10 deg off
+    # leaves 52-95 % of the valid beams as detected changes. 0.45 drops all of those scans
+    # while correctly localised scans here stay below 5 %.
+    config = UpdaterConfig(lost_fraction=0.45)
+    for k, (angle, turn) in enumerate([(0, 10), (90, -10), (200, 10), (300, -10)]):
+        a = math.radians(angle)
+
+        def off(p, a=a, turn=turn):
+            return Pose2D(p.x + 0.5 * math.cos(a), p.y + 0.5 * math.sin(a),
+                          p.theta + math.radians(turn))
+        fractions = []
+
+        def each(updater, report):
+            if report.processed:
+                fractions.append(report.raw_detected_changes / report.valid_beams)
+                assert report.dropped_as_lost and report.changed_flags == 0
+        updater, _, _ = drive(ref, shapes, config, seconds=40, seed=k, each=each, offset=off)
+        assert len(fractions) > 100            # a lost scan does not advance the gate
+        assert not updater.change_counts().any() and updater.n_changed == 0
+        assert (updater.updated_map().data == ref.data).all()
+    fractions = []
+    drive(ref, shapes, config, seconds=40, each=lambda u, r: fractions.append(
+        r.raw_detected_changes / r.valid_beams) if r.processed else None)
+    assert max(fractions) < 0.05
+
+
+def test_default_lost_check_drops_gross_errors_and_they_change_nothing():
+    walls = world.room_walls()
+    ref = world.rasterise(walls, hollow=[BOX])
+    dropped = []
+
+    def each(updater, report):
+        if report.dropped_as_lost:
+            dropped.append(report.raw_detected_changes / report.valid_beams)
+    updater, _, _ = drive(ref, walls + [BOX], seconds=30, each=each,
+                          offset=lambda p: Pose2D(p.x + 1.0, p.y - 0.5, p.theta + 0.6))
+    assert len(dropped) > 30 and min(dropped) > 0.8
+    assert updater.stats["processed"] == 0 and not updater.change_counts().any()
+
+
+def test_last_check_closes_a_cut_object_against_its_unknown_interior():
+    # M has a 2 x 1 m block (outline occupied, interior unknown); its western half is gone.
+    walls = world.room_walls()
+    block = Rect(4.5125, 5.0125, 6.5125, 6.0125)
+    kept = Rect(5.5125, 5.0125, 6.5125, 6.0125)
+    ref = world.rasterise(walls, hollow=[block])
+    interior = world.cells_of(block) & (ref.data == UNKNOWN)
+    results = {}
+    for last_check in (True, False):
+        updater, _, _ = drive(ref, walls + [kept], UpdaterConfig(last_check=last_check))
+        out = updater.updated_map().data
+        assert updater.enclosed_unknown()[interior].all() == last_check
+        # an unknown cell of the interior that touches a free cell is a hole in the outline
+        free = np.pad(out == FREE, 1)
+        touches = np.zeros_like(interior)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                touches |= free[1 + dr:1 + dr + out.shape[0], 1 + dc:1 + dc + out.shape[1]]
+        results[last_check] = (interior & (out == UNKNOWN) & touches).sum(), out
+    holes, out = results[True]
+    assert holes == 0 and results[False][0] > 5
+    west = world.cells_of(Rect(4.5125, 5.0125, 5.3, 6.0125))
+    assert (out[west] == FREE).all()                # the removed half is free
+    closed = interior & (out == OCCUPIED) & (results[False][1] == UNKNOWN)
+    assert closed.sum() >= 15                       # a new edge across the 1 m cut
+
+
+def test_last_check_draws_no_wall_along_unknown_that_reaches_the_map_border():
+    # A door in the east wall, closed in M, open in the world; beyond it unknown space that
+    # reaches the map border, with a wall 0.3 m out. Seeing through the door must not close.
+    walls = world.room_walls()
+    east = Rect(10.5, 4.5125, 10.65, 6.5125)
+    world_walls = [w for w in walls if w.x0 != 10.5] + [
+        Rect(10.5, 0.35, 10.65, 4.5125), Rect(10.5, 6.5125, 10.65, 10.65),
+        Rect(10.9, 0.35, 10.95, 10.65)]
+    ref = world.rasterise(walls)
+    updater, _, _ = drive(ref, world_walls)
+    out = updater.updated_map().data
+    door = world.cells_of(east) & (ref.data == OCCUPIED)
+    assert (out[door] == FREE).mean() > 0.5         # the door is seen open
+    assert not updater.enclosed_unknown().any()
+    assert ((ref.data == UNKNOWN) & (out == OCCUPIED)).sum() == 0

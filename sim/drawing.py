@@ -68,10 +68,10 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
     for b in geo.wall_boxes(scenario.world.bounds, scenario.world.wall_thickness):
         ax.add_patch(Polygon(geo.box_corners(b[None])[0], color=COLORS["wall"]))
     for ob in world.obstacles:
-        if ob.id in changed:
-            color = COLORS["added"] if ob in added else COLORS["movable"]
+        if ob in added:
+            color = COLORS["added"]
         else:
-            color = COLORS["pallet"] if "pallet" in (ob.kind + ob.id) else \
+            color = COLORS["pallet"] if ob.kind == "pallet" else \
                 COLORS["movable"] if ob.movable else COLORS["static"]
         lw = 2.0 if ob.id in changed else 0.5
         ax.add_patch(Polygon(_outline(ob), facecolor=color, edgecolor="black", lw=lw, alpha=0.9))

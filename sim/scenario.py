@@ -149,6 +149,8 @@ class Scenario:
     def session_index(self, session: int | str) -> int:
         """The index (0 = first session) of a session given by index or name."""
         names = [s.name for s in self.sessions]
+        if isinstance(session, str) and session not in names and session.strip().isdigit():
+            session = int(session)                      # "2" from a command line
         if isinstance(session, str):
             if session in names:
                 return names.index(session)

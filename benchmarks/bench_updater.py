@@ -95,7 +95,7 @@ def time_scans(ref: OccupancyGrid, scans, passes: int = 3) -> dict:
     times = np.array(all_times[best]) * 1e3
     return {"median_ms": float(np.median(times)), "p90_ms": float(np.percentile(times, 90)),
             "mean_ms": float(times.mean()), "pass_medians_ms": [m * 1e3 for m in medians],
-            "lost": lost, "changed_cells": updater.n_changed, "state_bytes": updater.state_nbytes()}
+            "lost": lost, "changed_cells": updater.n_changed, "state_bytes": updater.state_bytes()}
 
 
 def rss_kb() -> float:
@@ -115,7 +115,7 @@ def memory_child(scans_count: int) -> None:
     updater = MapUpdater(reference(2000), UpdaterConfig(gating=False))
     for scan, pose in scans:
         updater.process(scan, pose)
-    print(json.dumps({"state_bytes": updater.state_nbytes(), "rss_before_kb": rss_before,
+    print(json.dumps({"state_bytes": updater.state_bytes(), "rss_before_kb": rss_before,
                       "rss_after_kb": rss_kb(),
                       "peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}))
 

@@ -223,7 +223,7 @@ def test_report_verdicts_and_counts():
     assert r.changed_cells == rows.size == u.n_changed > 0
     assert (u.updated_map().data[rows, cols] == 100).all()
     fixed = 3 * ref.data.size + 4 * ((ref.data.size + 7) // 8)   # M, buffers, 4 bit planes
-    assert fixed < u.state_nbytes() < fixed + 1_000_000             # + scan-sized workspace
+    assert fixed < u.state_bytes() < fixed + 1_000_000             # + scan-sized workspace
 
 
 def _runs(mask):

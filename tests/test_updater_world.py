@@ -143,6 +143,14 @@ def full_scan(shapes, pose, t, beams=720, max_range=20.0) -> Scan:
     return Scan(cast(shapes, pose, angles, max_range), -math.pi, inc, 0.05, max_range, time=t)
 
 
+def partial_scan(shapes, pose, t, fov_deg=270.0, beams=1081, max_range=20.0) -> Scan:
+    """A lidar of less than 360 deg, first and last beams at -fov/2 and +fov/2."""
+    inc = math.radians(fov_deg) / (beams - 1)
+    angle_min = -math.radians(fov_deg) / 2
+    angles = angle_min + inc * np.arange(beams)
+    return Scan(cast(shapes, pose, angles, max_range), angle_min, inc, 0.05, max_range, time=t)
+
+
 def hit_points(scan: Scan, pose: Pose2D) -> tuple[np.ndarray, np.ndarray]:
     ok = np.isfinite(scan.ranges)
     a = pose.theta + scan.angles()[ok]

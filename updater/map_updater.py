@@ -199,7 +199,7 @@ class MapUpdater:
         bits = np.unpackbits(self._enclosed, bitorder="little")[:self._ref.size]
         return bits.reshape(self._ref.shape).astype(bool)
 
-    def state_nbytes(self) -> int:
+    def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
         arrays = (self._ref, self._hist, self._decided, self._ch_marks, self._un_marks,
                   self._enclosed)

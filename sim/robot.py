@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gridmap import Pose2D, wrap_angle
+from gridmap import wrap_angle
 
 TURN_DONE = 0.03          # [rad] heading error at which a turn on the spot ends
 TURN_START = 0.5          # [rad] heading error that stops the robot for a turn on the spot

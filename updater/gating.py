@@ -88,14 +88,16 @@ class Gate:
     def _reason(self, t, pose):
         cfg = self.config
         if self.idle:
-            if t - self.idle_t >= cfg.gate_recovery_time and self.travel >= cfg.gate_recovery_distance:
+            rested = t - self.idle_t >= cfg.gate_recovery_time
+            if rested and self.travel >= cfg.gate_recovery_distance:
                 self.idle = False
             else:
                 return GATED_FAST_TURN
         if t - self.proc_t < cfg.gate_min_interval:
             return GATED_INTERVAL
         moved = math.hypot(pose.x - self.proc_x, pose.y - self.proc_y) >= cfg.gate_min_distance
-        turned = math.degrees(abs(wrap_angle(pose.theta - self.proc_th))) >= cfg.gate_min_rotation_deg
+        turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))
+        turned = turn >= cfg.gate_min_rotation_deg
         return "" if moved or turned else GATED_NO_MOTION
 
     # --- saving and restoring -----------------------------------------------------------------

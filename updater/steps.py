@@ -46,11 +46,11 @@ class Workspace:
     outlives a scan. Sizes follow the scan (beams, cells it reaches), never the map."""
 
     def __init__(self):
-        self._beams = 0
-        self._virtual = 0
-        self._walk = 0
-        self._flags = 0
-        self._moved = 0
+        self._beams = -1
+        self._virtual = -1
+        self._walk = -1
+        self._flags = -1
+        self._moved = -1
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:

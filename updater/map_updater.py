@@ -51,7 +51,7 @@ class ScanReport:
     """What one call of ``MapUpdater.process`` did."""
 
     time: float                    # [s] the scan's time
-    processed: bool                # False: gated or skipped, see ``reason``
+    processed: bool                # classified; False: gated or skipped, see ``reason``
     reason: str = ""               # why not processed (gating.GATED_*, "sensor off the map")
     valid_beams: int = 0
     detected_changes: int = 0      # beams kept as detected changes by the run filter
@@ -128,6 +128,7 @@ class MapUpdater:
             return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
 
         beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
+        self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
                       raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
         if steps.is_lost(beams, cfg):
@@ -144,7 +145,6 @@ class MapUpdater:
         self._n_changed += steps.decide(hist, ref, self._decided, n_moved, width, cfg, self._ws)
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
-        self._counts["processed"] += 1
         return ScanReport(t, True, changed_flags=n_ch, new_obstacle_flags=n_new,
                           unchanged_flags=n_un, changed_cells=self._n_changed, **report)
 
@@ -171,7 +171,8 @@ class MapUpdater:
 
     @property
     def stats(self) -> dict:
-        """Counts of scans: seen, processed, gated, dropped as lost, skipped (off the map)."""
+        """Counts of scans: seen, processed (classified), gated, lost (processed, then dropped
+        by the lost check), skipped (sensor off the map)."""
         return dict(self._counts)
 
     def updated_map(self) -> OccupancyGrid:

@@ -28,11 +28,10 @@ class LocalizerConfig:
     alpha3: float = 0.2      # translation noise from translation
     alpha4: float = 0.2      # translation noise from rotation
     # Likelihood-field sensor model: nav2's laser_model_type "likelihood_field" (AMCL's
-    # 1 + sum pz^3) or "likelihood_field_prob" (the product of pz^importance_factor). Both
-    # defaults differ from nav2 (likelihood_field, 1.0); localization/README.md gives the
-    # measurements behind them.
+    # 1 + sum pz^3) or "likelihood_field_prob" (the product of pz^importance_factor). The
+    # default model differs from nav2's; localization/README.md gives the measurements.
     laser_model_type: str = "likelihood_field_prob"
-    importance_factor: float = 0.3
+    importance_factor: float = 1.0           # (nav2 fixes it at 1)
     min_ess_fraction: float = 0.02           # adaptive tempering floor, 0: off (not in nav2)
     laser_likelihood_max_dist: float = 2.0   # [m] distance field cap
     laser_min_range: float = -1.0            # [m] <= 0: the scan's range_min

@@ -1,9 +1,11 @@
-"""The Monte Carlo localiser: AMCL's filter (nav2's defaults) on an occupancy grid.
+"""The Monte Carlo localiser: AMCL's filter (nav2's parameters) on an occupancy grid.
 
 One filter update, when the robot has moved far enough since the last one:
-sample_motion (odometry motion model) -> likelihood_field (weights) -> estimate (heaviest
-cluster) -> kld_resample (every resample_interval updates, with Augmented MCL's random samples).
-Between updates the estimate is carried forward by odometry: ``Estimate.pose_at``.
+sample_motion (odometry motion model) -> likelihood_field (log-likelihood of each particle)
+-> weights (tempered if the scan alone would leave under min_ess_fraction of the particles
+effective) -> estimate (heaviest cluster) -> kld_resample (every resample_interval updates, with
+Augmented MCL's random samples). Between updates the estimate is carried forward by odometry:
+``Estimate.pose_at``. localization/README.md lists where and why this departs from nav2.
 """
 
 from __future__ import annotations
@@ -160,12 +162,20 @@ class MonteCarloLocalizer:
     def _sensor_update(self, scan: Scan, sensor_mount: Pose2D) -> None:
         c = self.config
         beams = select_beams(scan, c.max_beams, c.laser_min_range, c.laser_max_range)
+        if beams.count == 0:                     # nothing returned: the scan says nothing
+            return
         log_p = likelihood_field(self._field, self._particles, sensor_mount, beams)
         with np.errstate(divide="ignore"):
             log_prior = np.log(self._weights)
         # The measurement's likelihood under the prior, log sum(w_prior * p), feeds the recovery
         # averages (Probabilistic Robotics' w_avg; it is mean(p) after a resampling).
-        self._recovery.observe(log_sum_exp(log_prior + log_p))
+        log_avg = log_sum_exp(log_prior + log_p)
+        if c.laser_model_type == "likelihood_field_prob":
+            # Per beam (the geometric mean of pz): a product over 60 beams moves by several
+            # nats when a few beams meet a moved pallet, which would read as "lost" and scatter
+            # most particles; per beam, only a scan that disagrees as a whole does.
+            log_avg /= beams.count * c.importance_factor
+        self._recovery.observe(log_avg)
         beta = temper(log_prior, log_p, c.min_ess_fraction)
         log_w = log_prior + beta * log_p
         self._weights = normalise(np.exp(log_w - np.max(log_w)))

@@ -180,8 +180,9 @@ class Recovery:
 
     The averages are kept as logarithms, since a likelihood of 60 beams can leave the range of
     a float. Unlike AMCL, they are not restarted after each injection: AMCL's restart sets both
-    to the lost filter's likelihood, after which nothing is injected any more, and a kidnapped
-    robot stays lost (measured in tests/test_localization_filter.py).
+    to the lost filter's likelihood, after which nothing is injected any more and a kidnapped
+    robot mostly stays lost (localization/README.md: 2 of 20 kidnaps found with the restart,
+    20 of 20 without).
     """
 
     alpha_slow: float

@@ -2,10 +2,12 @@
 
 Per beam, pz = z_hit * exp(-d^2 / (2 sigma_hit^2)) + z_rand / range_max, where d is the distance
 from the beam's end point to the nearest occupied cell, capped at laser_likelihood_max_dist.
-A particle's score is AMCL's ``1 + sum(pz^3)`` rather than the textbook product of pz: 60 beams
-of one scan are far from independent, and the product makes the filter so confident that it
-collapses onto one wrong particle; the sum of cubes keeps enough particles alive (nav2 keeps it
-for the same reason).
+The beams of a particle combine as in one of nav2's two laser models:
+- ``likelihood_field``: AMCL's ad-hoc ``1 + sum(pz^3)``. Robust, but so flat that the particle
+  cloud stays some 10 cm wide and so does the error (localization/README.md);
+- ``likelihood_field_prob``: the product of pz, each raised to importance_factor (Probabilistic
+  Robotics 6.3.4: beams of one scan are not independent, so each counts for less than one).
+Scores are returned as log-likelihoods, since a product of 60 beams underflows easily.
 
 What AMCL does, and so this module does, with beams and cells:
 - a beam is used when its range is finite and range_min < r < range_max; max-range and
@@ -13,7 +15,8 @@ What AMCL does, and so this module does, with beams and cells:
 - only occupied cells are obstacles: an end point in an unknown cell scores by its distance to
   the nearest occupied cell like one in a free cell;
 - an end point off the map scores as if at the maximum distance (no obstacle nearby).
-pz^3 is precomputed per cell (one table lookup per beam, no exp), for the scan's range_max.
+The per-beam term is precomputed per cell (one table lookup per beam, no exp or log), for the
+scan's range_max.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ def test_defaults_are_nav2_amcl_where_not_documented_otherwise():
     assert (c.kld_bin_xy, c.kld_bin_theta) == (0.5, pytest.approx(math.radians(10)))
     # The documented departures (localization/README.md):
     assert (c.laser_model_type, c.importance_factor, c.min_ess_fraction) == \
-        ("likelihood_field_prob", 0.3, 0.02)
+        ("likelihood_field_prob", 1.0, 0.02)
 
 
 def test_frozen():

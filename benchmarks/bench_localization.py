@@ -16,7 +16,6 @@ for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL
     os.environ[var] = "1"
 
 import argparse  # noqa: E402
-import math  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -115,7 +114,7 @@ def main(argv=None) -> None:
         print(f"{name:<{width}}  {ms:8.3f}  {mark}")
     print(f"(beams used: {beams.count}; scan of {scans[50].beams} beams; "
           f"map {grid.width} x {grid.height} cells at {grid.resolution} m; "
-          f"{math.ceil(len(scans))} scans)")
+          f"{len(scans)} scans)")
 
 
 if __name__ == "__main__":

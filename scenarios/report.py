@@ -1,0 +1,212 @@
+"""What a run leaves behind: maps, trajectories, metrics.json, report.md and figures.
+
+Every file is written to a temporary name and renamed, so a run killed halfway never leaves a
+truncated map or report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import FREE, OCCUPIED, OccupancyGrid
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_session_maps(out_dir: Path, result) -> None:
+    """M_i and G_i of one session as map_server YAML + PGM."""
+    from gridmap import save_map
+
+    maps = Path(out_dir) / "maps"
+    maps.mkdir(parents=True, exist_ok=True)
+    idx = result.name
+    save_map(result.updated, maps / f"M_{idx}.yaml")
+    save_map(result.truth, maps / f"G_{idx}.yaml")
+    if result.oracle is not None:
+        save_map(result.oracle, maps / f"oracle_{idx}.yaml")
+
+
+def write_tum(path: Path, time: np.ndarray, poses: np.ndarray) -> None:
+    """Trajectory in TUM format: ``t x y z qx qy qz qw`` with z = 0, yaw as a quaternion."""
+    lines = [f"{t:.6f} {p[0]:.6f} {p[1]:.6f} 0 0 0 {math.sin(p[2] / 2):.9f} "
+             f"{math.cos(p[2] / 2):.9f}" for t, p in zip(time, poses)]
+    atomic_write_text(path, "\n".join(lines) + ("\n" if lines else ""))
+
+
+def _fmt(v, digits=2) -> str:
+    if v is None:
+        return "n/a"
+    return f"{v:.{digits}f}"
+
+
+def machine_summary() -> str:
+    return f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def render_report(metrics: dict) -> str:
+    """report.md: the paper's Tables I and II and the project's own tables."""
+    sessions = [s for s in metrics["sessions"] if "change_detection" in s]
+    out = [f"# Map updating on `{metrics['scenario']}`", "",
+           f"Seed {metrics['seed']}{', quick routes' if metrics.get('quick') else ''}; "
+           f"wall time {metrics['wall_time_s']:.1f} s on {machine_summary()}.", ""]
+    first = metrics["sessions"][0]
+    if "initial_vs_truth" in first.get("map_metrics", {}):
+        m = first["map_metrics"]["initial_vs_truth"]
+        out += [f"M1 (built in {first['name']} by log-odds mapping) against G1: "
+                f"CC {m['cc']:.2f} %, MS {m['ms']:.2f} %, OPDF {m['opdf']:.2f} %.", ""]
+    if not sessions:
+        return "\n".join(out) + "\n"
+
+    out += ["## Map quality (the paper's Table I)", "",
+            "| session | metric | M(i-1) vs G(i) | M(i) vs G(i) | oracle vs G(i) |",
+            "|---|---|---|---|---|"]
+    for s in sessions:
+        mm = s["map_metrics"]
+        for key, label in (("cc", "CC %"), ("ms", "MS %"), ("opdf", "OPDF %")):
+            out.append(f"| {s['name']} | {label} | {_fmt(mm['previous_vs_truth'][key])} | "
+                       f"{_fmt(mm['updated_vs_truth'][key])} | "
+                       f"{_fmt(mm['oracle_vs_truth'][key])} |")
+    out += ["", "## Localisation, APE in metres (the paper's Table II)", "",
+            "| session | map | max | mean | median | min | RMSE | std |",
+            "|---|---|---|---|---|---|---|---|"]
+    for s in sessions:
+        for key, label in (("initial_map", "M1"), ("previous_map", "M(i-1)")):
+            a = s["localization"][key]
+            out.append(f"| {s['name']} | {label} | " + " | ".join(
+                _fmt(a[k], 3) for k in ("max", "mean", "median", "min", "rmse", "std")) + " |")
+    out += ["", "## Change detection (one cell of slack)", "",
+            "| session | precision | recall | F1 | recall_all | changes | targets | ghosts |",
+            "|---|---|---|---|---|---|---|---|"]
+    for s in sessions:
+        cd = s["change_detection"]
+        out.append(f"| {s['name']} | {_fmt(cd['precision'], 3)} | {_fmt(cd['recall'], 3)} | "
+                   f"{_fmt(cd['f1'], 3)} | {_fmt(cd['recall_all'], 3)} | {cd['changes']} | "
+                   f"{cd['target_cells']} | {s['ghost_cells']} |")
+    out += ["", "## Resources", "",
+            "| session | scans | processed | dropped as lost | updater CPU s | "
+            "localiser CPU s | updater state MB | peak RSS MB | simulated s |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for s in sessions:
+        r = s["resources"]
+        out.append(f"| {s['name']} | {r['scans']} | {r['scans_processed']} | "
+                   f"{r['scans_dropped_as_lost']} | {r['updater_cpu_s']:.2f} | "
+                   f"{r['localizer_cpu_s']:.2f} | {r['updater_state_bytes'] / 1e6:.2f} | "
+                   f"{r['peak_rss_mb']:.0f} | {r['simulated_s']:.0f} |")
+    out += ["", "Figures: `fig_maps_<session>.png` (M(i-1), M(i), G(i); removed cells red, "
+            "added green), `fig_trajectories_<session>.png`, `fig_metrics.png`.", ""]
+    return "\n".join(out)
+
+
+def _map_rgb(grid: OccupancyGrid) -> np.ndarray:
+    d = grid.data
+    img = np.full(d.shape + (3,), 0.75)
+    img[d == FREE] = 1.0
+    img[d == OCCUPIED] = 0.0
+    return img[::-1]   # row 0 is the lowest y: flip so north is up
+
+
+def _save_fig(fig, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    os.replace(tmp, path)
+
+
+def write_figures(out_dir: Path, run) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    for s in run.sessions:
+        if s.previous is None:
+            continue
+        prev, upd = s.previous.data, s.updated.data
+        img = _map_rgb(s.updated)
+        removed = ((prev == OCCUPIED) & (upd == FREE))[::-1]
+        added = ((prev != OCCUPIED) & (upd == OCCUPIED))[::-1]
+        img[removed] = (0.9, 0.1, 0.1)
+        img[added] = (0.1, 0.75, 0.1)
+        fig, axes = plt.subplots(1, 3, figsize=(12, 6))
+        for ax, im, title in zip(axes, (_map_rgb(s.previous), img, _map_rgb(s.truth)),
+                                 (f"M(i-1) before {s.name}", f"M(i) after {s.name}",
+                                  f"G(i) of {s.name}")):
+            ax.imshow(im, interpolation="nearest")
+            ax.set_title(title)
+            ax.set_axis_off()
+        _save_fig(fig, out_dir / f"fig_maps_{s.name}.png")
+        plt.close(fig)
+
+        tr = s.trajectory.arrays()
+        x0, y0, x1, y1 = s.truth.extent()
+        fig, ax = plt.subplots(figsize=(6, 8))
+        ax.imshow(_map_rgb(s.updated), extent=(x0, x1, y0, y1), interpolation="nearest")
+        ax.plot(tr["true"][:, 0], tr["true"][:, 1], "k-", lw=1.5, label="true")
+        ax.plot(tr["previous_map"][:, 0], tr["previous_map"][:, 1], "b--", lw=1,
+                label="estimated on M(i-1)")
+        ax.plot(tr["initial_map"][:, 0], tr["initial_map"][:, 1], "r:", lw=1,
+                label="estimated on M1")
+        ax.legend(loc="lower right", fontsize=8)
+        ax.set_title(f"Trajectories in {s.name}")
+        _save_fig(fig, out_dir / f"fig_trajectories_{s.name}.png")
+        plt.close(fig)
+
+    sessions = [m for m in run.metrics["sessions"] if "change_detection" in m]
+    if sessions:
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+        names = [m["name"] for m in sessions]
+        x = np.arange(len(names))
+        for ax, key in zip(axes, ("cc", "ms", "opdf")):
+            for k, (which, label) in enumerate((("previous_vs_truth", "M(i-1)"),
+                                                ("updated_vs_truth", "M(i)"),
+                                                ("oracle_vs_truth", "oracle"))):
+                ax.bar(x + (k - 1) * 0.27, [m["map_metrics"][which][key] for m in sessions],
+                       0.27, label=label)
+            ax.set_xticks(x, names)
+            ax.set_title(key.upper() + " %")
+        axes[0].legend(fontsize=8)
+        _save_fig(fig, out_dir / "fig_metrics.png")
+        plt.close(fig)
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"cannot write {type(o).__name__} to JSON")
+
+
+def write_outputs(run) -> None:
+    out_dir = Path(run.out_dir)
+    for s in run.sessions:
+        if s.trajectory is None:
+            continue
+        tr = s.trajectory.arrays()
+        traj_dir = out_dir / "trajectories"
+        traj_dir.mkdir(exist_ok=True)
+        write_tum(traj_dir / f"{s.name}_true.tum", tr["time"], tr["true"])
+        write_tum(traj_dir / f"{s.name}_on_previous_map.tum", tr["time"], tr["previous_map"])
+        write_tum(traj_dir / f"{s.name}_on_initial_map.tum", tr["time"], tr["initial_map"])
+    atomic_write_text(out_dir / "metrics.json",
+                      json.dumps(run.metrics, indent=2, default=_json_default) + "\n")
+    atomic_write_text(out_dir / "report.md", render_report(run.metrics))
+    write_figures(out_dir, run)

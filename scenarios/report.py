@@ -41,6 +41,11 @@ def write_session_maps(out_dir: Path, result) -> None:
     save_map(result.truth, maps / f"G_{idx}.yaml")
     if result.oracle is not None:
         save_map(result.oracle, maps / f"oracle_{idx}.yaml")
+    if result.masks:
+        # per-cell evaluation masks, for anyone who wants to recompute or inspect the scores
+        tmp = maps / f".masks_{idx}.tmp.npz"
+        np.savez_compressed(tmp, **result.masks)
+        os.replace(tmp, maps / f"masks_{idx}.npz")
 
 
 def write_tum(path: Path, time: np.ndarray, poses: np.ndarray) -> None:

@@ -68,6 +68,7 @@ class SessionResult:
     oracle: OccupancyGrid | None = None
     trajectory: Trajectory | None = None
     metrics: dict = field(default_factory=dict)
+    masks: dict = field(default_factory=dict)  # per-cell arrays: observable, people, ...
 
 
 @dataclass
@@ -215,7 +216,9 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
         },
     }
     return SessionResult(name, updated, truth, previous=previous, oracle=oracle,
-                         trajectory=traj, metrics=metrics)
+                         trajectory=traj, metrics=metrics,
+                         masks={"observable": observable, "people": people_mask,
+                                "observations": counter.counts})
 
 
 def default_out_dir(scenario_name: str) -> Path:

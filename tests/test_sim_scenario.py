@@ -224,9 +224,13 @@ def test_built_in_routes_keep_clear_of_every_object_in_every_session():
             assert geo.segment_box_distance(a, b, boxes).min() >= scn.robot.radius + 0.05
 
 
-def test_quick_variant_is_smaller():
+def test_quick_variant_cuts_update_routes_and_keeps_mapping_and_beams():
     scn = sim.load_scenario(WAREHOUSE)
     q = sim.quick_variant(scn)
-    assert q.robot.lidars[0].beams == 271
-    assert q.robot.lidars[0].angle_increment == pytest.approx(4 * scn.robot.lidars[0].angle_increment)
-    assert all(len(a.route) <= len(b.route) for a, b in zip(q.sessions, scn.sessions))
+    assert q.robot.lidars == scn.robot.lidars
+    assert q.sessions[0].route == scn.sessions[0].route          # W1 maps the whole warehouse
+    assert all(len(a.route) < len(b.route) for a, b in zip(q.sessions[1:], scn.sessions[1:]))
+    thin = sim.quick_variant(scn, beam_step=4)
+    assert thin.robot.lidars[0].beams == 271
+    assert thin.robot.lidars[0].angle_increment == pytest.approx(
+        4 * scn.robot.lidars[0].angle_increment)

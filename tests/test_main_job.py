@@ -1,0 +1,86 @@
+"""The main job end to end: `mapupdate run` on the built-in warehouse and on people-only sessions."""
+
+import json
+
+import numpy as np
+import pytest
+
+from gridmap import load_map
+from scenarios.cli import main
+
+SESSION_KEYS = {"name", "map_metrics", "change_detection", "ghost_cells", "localization",
+                "resources"}
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("quick")
+    assert main(["run", "--quick", "--out", str(out), "--no-progress"]) == 0
+    return out
+
+
+def test_quick_run_writes_every_output(quick_run):
+    out = quick_run
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["scenario"] == "aws_small_warehouse" and metrics["seed"] == 7
+    names = [s["name"] for s in metrics["sessions"]]
+    assert names == ["W1", "W2", "W3", "W4"]
+    for s in metrics["sessions"][1:]:
+        assert SESSION_KEYS <= set(s)
+        assert set(s["map_metrics"]) >= {"previous_vs_truth", "updated_vs_truth"}
+        assert set(s["localization"]["previous_map"]) == {"max", "mean", "median", "min",
+                                                          "rmse", "sse", "std"}
+    for name in names:
+        for kind in ("M", "G"):
+            grid = load_map(out / "maps" / f"{kind}_{name}.yaml")
+            assert grid.shape == load_map(out / "maps" / "G_W1.yaml").shape
+    for name in names[1:]:
+        assert (out / f"fig_maps_{name}.png").stat().st_size > 10_000
+        assert (out / f"fig_trajectories_{name}.png").stat().st_size > 10_000
+        tum = np.loadtxt(out / "trajectories" / f"{name}_on_previous_map.tum")
+        assert tum.shape[1] == 8 and len(tum) > 100
+    report = (out / "report.md").read_text()
+    assert "Table I" in report and "Table II" in report and "Change detection" in report
+
+
+def test_quick_run_updated_maps_beat_the_previous_ones(quick_run):
+    metrics = json.loads((quick_run / "metrics.json").read_text())
+    for s in metrics["sessions"][1:]:
+        mm = s["map_metrics"]
+        assert mm["updated_vs_truth"]["opdf"] > mm["previous_vs_truth"]["opdf"], s["name"]
+        assert s["ghost_cells"] == 0
+        assert s["change_detection"]["precision"] >= 0.9
+
+
+def test_people_without_changes_leave_the_map_alone(tmp_path):
+    assert main(["run", "warehouse_people_only", "--out", str(tmp_path), "--no-progress"]) == 0
+    s = json.loads((tmp_path / "metrics.json").read_text())["sessions"][1]
+    assert s["change_detection"]["incorrect_changes_pct_of_known"] < 0.1
+    assert s["ghost_cells"] == 0
+
+
+def test_unknown_scenario_is_a_one_line_error(capsys):
+    assert main(["run", "aws_small_warehous", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "no scenario named 'aws_small_warehous'" in err and "did you mean" in err
+
+
+@pytest.mark.slow
+def test_full_run_meets_the_bars(tmp_path):
+    """The figures the README reports: every session i >= 2 of the built-in warehouse."""
+    assert main(["run", "--out", str(tmp_path), "--no-progress"]) == 0
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["wall_time_s"] < 300
+    sessions = metrics["sessions"][1:]
+    for s in sessions:
+        mm, cd, loc = s["map_metrics"], s["change_detection"], s["localization"]
+        for k in ("cc", "ms", "opdf"):
+            assert mm["updated_vs_truth"][k] > mm["previous_vs_truth"][k], (s["name"], k)
+        assert mm["updated_vs_truth"]["opdf"] >= 95.0
+        assert mm["oracle_vs_truth"]["opdf"] - mm["updated_vs_truth"]["opdf"] <= 1.0
+        assert cd["precision"] >= 0.95 and cd["recall"] >= 0.8
+        assert s["ghost_cells"] == 0
+        assert loc["previous_map"]["rmse"] <= 0.10
+        assert loc["previous_map"]["rmse"] <= loc["initial_map"]["rmse"] + 0.01
+    last = sessions[-1]["localization"]
+    assert last["previous_map"]["rmse"] < last["initial_map"]["rmse"]

@@ -7,6 +7,11 @@ of every session. Imports ``gridmap`` only, never the robot software.
     for msg in world.run():          # OdometryMsg and ScanMsg in time order
         ...
     truth = world.ground_truth()     # G in grid_frame(scenario)
+
+or, to drive the robot by command instead of along its route:
+
+    world = World(scenario, "W2", seed=7)
+    msgs = world.step(0.4, 0.1)      # hold v [m/s], w [rad/s] for a physics step
 """
 
 from .groundtruth import grid_frame

@@ -2,7 +2,8 @@
 
 ``World(scenario, session, seed).run()`` steps the physics at a fixed rate and yields, in time
 order, an ``OdometryMsg`` at each odometry tick and a ``ScanMsg`` per lidar at each of its ticks,
-until the robot has driven its route. Messages that fall inside a physics step see the state at
+until the robot has driven its route. ``step(v, w)`` (or ``drive``) instead holds commanded
+speeds for a physics step and returns that step's messages: a caller drives the robot. Messages that fall inside a physics step see the state at
 their own time: the robot's arc is exact and people move in straight lines within a step. At a
 shared time the odometry message comes first, then the lidars in order.
 
@@ -31,6 +32,7 @@ from .scenario import Scenario
 
 PERSON_MASS = 70.0        # [kg]
 COLLISION_SLOP = 0.002    # [m] overlap the physics engine tolerates between bodies
+CONTACT_GAP = 0.01        # [m] a person this close to the robot's disc touches it
 _PEOPLE, _ODOMETRY, _EXTRA, _LIDAR0 = 0, 1, 2, 3   # component numbers in the seed tree
 _NOBODY = np.zeros((0, 3))
 
@@ -93,7 +95,10 @@ class World:
         self._people_now = self.crowd.discs()
         self.finished = False       # the route was driven to its end
         self.pushes = 0             # exact pushes of people out of the robot or objects
+        self.collisions = 0         # step(): moves refused because of a wall or object
+        self.people_contacts = 0    # step(): physics steps ending with a person at the robot
         self._started = False
+        self._stepping = False
 
     # --- state ------------------------------------------------------------------------------------
     @property
@@ -136,52 +141,122 @@ class World:
         return lid.measure(exact, spec, self._extra_rng if noise else None)
 
     # --- running ------------------------------------------------------------------------------------
+    @property
+    def physics_dt(self) -> float:
+        """[s] one physics step."""
+        return 1.0 / self.scenario.physics_hz
+
+    @property
+    def time_limit(self) -> float:
+        """[s] when the session gives up: its ``max_duration``, or time enough to drive the
+        route three times over."""
+        return self.session.max_duration or self._default_duration()
+
+    def route_command(self) -> tuple[float, float]:
+        """The route follower's speeds (v [m/s], w [rad/s]) for the next physics step, given the
+        robot's pose and the people now. Advances the follower's state: call once per step."""
+        return self.follower.command(self._pose, self.crowd.discs() if len(self.crowd)
+                                     else _NOBODY, self.physics_dt)
+
     def run(self):
         """Step the world and yield ``OdometryMsg`` and ``ScanMsg`` in time order until the robot
         has finished its route (or the session's ``max_duration`` has passed)."""
         if self._started:
             raise RuntimeError("World.run() can be called once; make a new World to replay")
-        self._started = True
-        physics = _Physics(self)
-        robot = self.scenario.robot
-        dt = 1.0 / self.scenario.physics_hz
-        rates = [robot.odometry_rate_hz] + [ld.rate_hz for ld in robot.lidars]
-        ticks = [0] * len(rates)
-        due = [0.0] * len(rates)
-        limit = self.session.max_duration or self._default_duration()
-        step = 0
+        self._begin()
+        limit = self.time_limit
         while True:
-            t0, t1 = step * dt, (step + 1) * dt
-            pose0, people0 = self._pose, self.crowd.pos.copy()
-            v, w = self.follower.command(pose0, self.crowd.discs() if len(self.crowd)
-                                         else _NOBODY, dt)
-            if len(self.crowd):
-                robot_disc = np.array([pose0[0], pose0[1], robot.radius])
-                physics.set_people_velocities(self.crowd.wished_velocities(robot_disc, dt))
-            self._pose = integrate(pose0, v, w, dt)
-            physics.step(dt, pose0, self._pose, v, w)
-            if len(self.crowd):
-                physics.read_people(self.crowd.pos, self.crowd.vel)
-                self._keep_people_out(physics, self._pose)
-            while True:   # every message due by the end of this step, earliest first
-                j = min(range(len(rates)), key=due.__getitem__)
-                if due[j] > t1 + 1e-9:
-                    break
-                t = due[j]
-                ticks[j] += 1
-                due[j] = ticks[j] / rates[j]
-                s = min(max((t - t0) / dt, 0.0), 1.0)
-                yield self._message(j, t, integrate(pose0, v, w, s * dt),
-                                    people0 + s * (self.crowd.pos - people0))
-            step += 1
+            v, w = self.route_command()
+            yield from self._advance(v, w, blocking=False)
             done = self.follower.done and self.follower.v == 0.0 and self.follower.w == 0.0
-            if done or t1 >= limit:
+            if done or self._step * self._dt >= limit:
                 self.finished = done
                 if not done:
                     warnings.warn(f"{self.scenario.name}/{self.session.name}: the robot did not "
                                   f"finish its route within {limit:.0f} s", RuntimeWarning,
                                   stacklevel=2)
                 return
+
+    def step(self, v: float, w: float, n_steps: int = 1) -> list:
+        """Drive the robot by command instead of along its route: hold speed ``v`` [m/s] and turn
+        rate ``w`` [rad/s], clipped to the robot's limits, for ``n_steps`` physics steps and
+        return the messages of that interval in time order. A move that would put the robot
+        into a wall or an object is not made (it stands still for that step) and counts in
+        ``collisions``; steps that end with a person touching the robot count in
+        ``people_contacts``. Cannot be mixed with ``run()``."""
+        return list(self.drive(v, w, n_steps))
+
+    def drive(self, v: float, w: float, n_steps: int = 1):
+        """``step`` as a generator: the world's state (``people()``, ``true_pose``) is that of
+        each message's time while it is handled. Iterate it to the end before the next call."""
+        if self._started and not self._stepping:
+            raise RuntimeError("World.step() cannot follow World.run(); make a new World")
+        robot = self.scenario.robot
+        v = min(max(float(v), -robot.max_speed), robot.max_speed)
+        w = min(max(float(w), -robot.max_turn_rate), robot.max_turn_rate)
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"speeds must be finite, got v={v}, w={w}")
+        if not self._started:
+            self._begin()
+            self._stepping = True
+        for _ in range(int(n_steps)):
+            yield from self._advance(v, w, blocking=True)
+
+    def _begin(self) -> None:
+        self._started = True
+        self._physics = _Physics(self)
+        robot = self.scenario.robot
+        self._dt = 1.0 / self.scenario.physics_hz
+        self._rates = [robot.odometry_rate_hz] + [ld.rate_hz for ld in robot.lidars]
+        self._ticks = [0] * len(self._rates)
+        self._due = [0.0] * len(self._rates)
+        self._step = 0
+
+    def _advance(self, v: float, w: float, blocking: bool):
+        """One physics step with the robot at (v, w); yields the messages due within it. With
+        ``blocking`` a move into a wall or object is refused (the route follower never makes
+        one, and run() must stay exactly as it was, so it does not check)."""
+        physics, dt, robot = self._physics, self._dt, self.scenario.robot
+        rates, ticks, due = self._rates, self._ticks, self._due
+        t0, t1 = self._step * dt, (self._step + 1) * dt
+        pose0, people0 = self._pose, self.crowd.pos.copy()
+        if len(self.crowd):
+            robot_disc = np.array([pose0[0], pose0[1], robot.radius])
+            physics.set_people_velocities(self.crowd.wished_velocities(robot_disc, dt))
+        pose1 = integrate(pose0, v, w, dt)
+        if blocking and v != 0.0 and self._hits_object(pose1):
+            self.collisions += 1
+            v = 0.0               # it may still turn on the spot: a disc turning hits nothing
+            pose1 = integrate(pose0, v, w, dt)
+        self._pose = pose1
+        physics.step(dt, pose0, self._pose, v, w)
+        if len(self.crowd):
+            physics.read_people(self.crowd.pos, self.crowd.vel)
+            self._keep_people_out(physics, self._pose)
+            if blocking and self._touches_people(self._pose):
+                self.people_contacts += 1
+        while True:   # every message due by the end of this step, earliest first
+            j = min(range(len(rates)), key=due.__getitem__)
+            if due[j] > t1 + 1e-9:
+                break
+            t = due[j]
+            ticks[j] += 1
+            due[j] = ticks[j] / rates[j]
+            s = min(max((t - t0) / dt, 0.0), 1.0)
+            yield self._message(j, t, integrate(pose0, v, w, s * dt),
+                                people0 + s * (self.crowd.pos - people0))
+        self._step += 1
+
+    def _hits_object(self, pose) -> bool:
+        """Whether the robot's disc at ``pose`` overlaps a wall or an object (touching is fine)."""
+        r = self.scenario.robot.radius - geo.TOUCH_TOL
+        xy = np.asarray(pose[:2])[None]
+        return bool((geo.point_box_distance(xy, self.boxes) < r).any()
+                    or (geo.point_circle_distance(xy, self.circles) < r).any())
+
+    def _touches_people(self, pose) -> bool:
+        d = np.hypot(self.crowd.pos[:, 0] - pose[0], self.crowd.pos[:, 1] - pose[1])
+        return bool((d < self.crowd.radius + self.scenario.robot.radius + CONTACT_GAP).any())
 
     def _default_duration(self) -> float:
         pts = self.follower.waypoints

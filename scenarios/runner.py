@@ -14,6 +14,7 @@ import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -35,6 +36,19 @@ class RunOptions:
     progress: bool = True
     updater_config: object | None = None
     localizer_config: object | None = None
+    observer: SessionObserver | None = None   # told of every update session's scans
+
+
+class SessionObserver(Protocol):
+    """What ``RunOptions.observer`` is told, e.g. to record a run (``rerun_log``). Its calls
+    happen outside the timed parts of the session, so its cost never shows in the scores."""
+
+    def session_start(self, scenario, session: int, world, previous: OccupancyGrid,
+                      initial: OccupancyGrid, updater, localizer) -> None: ...
+
+    def scan(self, msg, estimate: Pose2D, report, world, updater, localizer) -> None: ...
+
+    def session_end(self, result: SessionResult) -> None: ...
 
 
 @dataclass
@@ -153,6 +167,9 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     loc_prev.initialize(start, cov)
     loc_init.initialize(start, cov)
     upd = MapUpdater(previous, options.updater_config)
+    observer = options.observer
+    if observer is not None:
+        observer.session_start(scenario, session, world, previous, initial, upd, loc_prev)
     counter = ev.ObservationCounter(frame)
     people_mask = np.zeros(frame.shape, bool)
     traj = Trajectory()
@@ -186,6 +203,8 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
                 counter.add_scan(msg.true_pose.compose(mount), clean.ranges, clean.angles())
             ev.paint_people(people_mask, frame, world.people())
             traj.add(msg.time, msg.true_pose, est_prev, est_init)
+            if observer is not None:
+                observer.scan(msg, est_prev, report, world, upd, loc_prev)
             bar.update(max(0.0, round(msg.time) - bar.n))
 
     updated = upd.updated_map()
@@ -215,10 +234,13 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
             **counts,
         },
     }
-    return SessionResult(name, updated, truth, previous=previous, oracle=oracle,
-                         trajectory=traj, metrics=metrics,
-                         masks={"observable": observable, "people": people_mask,
-                                "observations": counter.counts})
+    result = SessionResult(name, updated, truth, previous=previous, oracle=oracle,
+                           trajectory=traj, metrics=metrics,
+                           masks={"observable": observable, "people": people_mask,
+                                  "observations": counter.counts})
+    if observer is not None:
+        observer.session_end(result)
+    return result
 
 
 def default_out_dir(scenario_name: str) -> Path:

@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test test-all bench setup clean
+.PHONY: run test test-all bench setup clean readme-tables
 
 $(BIN)/mapupdate: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -27,3 +27,8 @@ bench: setup
 
 clean:
 	rm -rf $(VENV) build *.egg-info
+
+# Run the built-in warehouse with its default seed and copy the tables into README.md.
+readme-tables: setup
+	$(BIN)/mapupdate run --out runs/readme --no-progress
+	$(BIN)/python -m scenarios.readme runs/readme

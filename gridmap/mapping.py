@@ -18,12 +18,12 @@ This is how the initial map M1 is built from the mapping session's scans and tru
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .config import config_from_dict
 from .types import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid, Pose2D, Scan
 
 
@@ -61,13 +61,7 @@ class LogOddsParams:
     @classmethod
     def from_dict(cls, d: dict) -> LogOddsParams:
         """Build from a mapping (e.g. parsed YAML); unknown keys are refused by name."""
-        names = [f.name for f in fields(cls)]
-        for key in d:
-            if key not in names:
-                close = difflib.get_close_matches(str(key), names, n=1)
-                hint = f" (did you mean '{close[0]}'?)" if close else ""
-                raise GridError(f"log-odds mapping: unknown key '{key}'{hint}")
-        return cls(**d)
+        return config_from_dict(cls, d, GridError, "log-odds mapping")
 
 
 class LogOddsMapper:

@@ -6,10 +6,10 @@ that nav2 does not have are marked below. Loading refuses unknown keys with the 
 
 from __future__ import annotations
 
-import difflib
 import math
-from dataclasses import dataclass, fields
-from pathlib import Path
+from dataclasses import dataclass
+
+from gridmap.config import config_from_dict, config_from_yaml
 
 
 class LocalizationError(ValueError):
@@ -99,40 +99,12 @@ class LocalizerConfig:
     @classmethod
     def from_dict(cls, values: dict, source: str = "config") -> LocalizerConfig:
         """Build from a mapping; an unknown key is refused with the nearest valid name."""
-        if not isinstance(values, dict):
-            raise LocalizationError(f"{source}: expected a mapping of keys, got {type(values).__name__}")
-        known = [f.name for f in fields(cls)]
-        for key in values:
-            if key not in known:
-                near = difflib.get_close_matches(str(key), known, n=1)
-                hint = f" (did you mean '{near[0]}'?)" if near else ""
-                raise LocalizationError(f"{source}: unknown key '{key}'{hint}")
-        kwargs = {}
-        for f in fields(cls):
-            if f.name in values:
-                v = values[f.name]
-                # YAML writes 2 for 2.0: accept ints where floats are expected, nothing looser.
-                if f.type == "float" and isinstance(v, int) and not isinstance(v, bool):
-                    v = float(v)
-                kwargs[f.name] = v
-        try:
-            return cls(**kwargs)
-        except LocalizationError as e:
-            raise LocalizationError(f"{source}: {e}") from None
+        return config_from_dict(cls, values, LocalizationError, source)
 
     @classmethod
     def from_yaml(cls, path) -> LocalizerConfig:
         """Load from a YAML file holding the keys at the top level (or under ``localization:``)."""
-        import yaml
-
-        path = Path(path)
-        try:
-            values = yaml.safe_load(path.read_text()) or {}
-        except (OSError, yaml.YAMLError) as e:
-            raise LocalizationError(f"{path}: cannot read the localiser configuration: {e}") from None
-        if isinstance(values, dict) and set(values) == {"localization"}:
-            values = values["localization"] or {}
-        return cls.from_dict(values, source=str(path))
+        return config_from_yaml(cls, path, LocalizationError, "localization")
 
 
 def _check(name, value, ok, what):

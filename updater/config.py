@@ -6,10 +6,10 @@ Every parameter of the method lives here, with its unit in brackets. Loading (``
 
 from __future__ import annotations
 
-import difflib
 import math
-from dataclasses import asdict, dataclass, fields
-from pathlib import Path
+from dataclasses import asdict, dataclass
+
+from gridmap.config import config_from_dict, config_from_yaml
 
 
 class UpdaterError(ValueError):
@@ -114,41 +114,12 @@ class UpdaterConfig:
     @classmethod
     def from_dict(cls, values: dict, source: str = "updater config") -> UpdaterConfig:
         """Build from a mapping; an unknown key is refused with the nearest valid name."""
-        if not isinstance(values, dict):
-            raise UpdaterError(f"{source}: expected a mapping of keys, got "
-                               f"{type(values).__name__}")
-        known = [f.name for f in fields(cls)]
-        for key in values:
-            if key not in known:
-                near = difflib.get_close_matches(str(key), known, n=1)
-                hint = f" (did you mean '{near[0]}'?)" if near else ""
-                raise UpdaterError(f"{source}: unknown key '{key}'{hint}")
-        kwargs = {}
-        for f in fields(cls):
-            if f.name in values:
-                v = values[f.name]
-                # YAML writes 2 for 2.0: accept ints where floats are expected, nothing looser.
-                if f.type == "float" and isinstance(v, int) and not isinstance(v, bool):
-                    v = float(v)
-                kwargs[f.name] = v
-        try:
-            return cls(**kwargs)
-        except UpdaterError as e:
-            raise UpdaterError(f"{source}: {e}") from None
+        return config_from_dict(cls, values, UpdaterError, source)
 
     @classmethod
     def from_yaml(cls, path) -> UpdaterConfig:
         """Load from a YAML file holding the keys at the top level (or under ``updater:``)."""
-        import yaml
-
-        path = Path(path)
-        try:
-            values = yaml.safe_load(path.read_text()) or {}
-        except (OSError, yaml.YAMLError) as e:
-            raise UpdaterError(f"{path}: cannot read the updater config: {e}") from None
-        if isinstance(values, dict) and set(values) == {"updater"}:
-            values = values["updater"] or {}
-        return cls.from_dict(values, source=str(path))
+        return config_from_yaml(cls, path, UpdaterError, "updater")
 
 
 def _check_number(name, v, ok, what):

@@ -1,0 +1,46 @@
+"""Building frozen configuration dataclasses from mappings and YAML files, the one way every
+package does it: unknown keys are refused with the nearest valid name."""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import fields
+from pathlib import Path
+
+
+def config_from_dict(cls, values, error: type[Exception], source: str):
+    """``cls(**values)`` after refusing unknown keys (with a did-you-mean) and accepting ints
+    where floats are expected (YAML writes 2 for 2.0); errors are ``error``s naming ``source``."""
+    if not isinstance(values, dict):
+        raise error(f"{source}: expected a mapping of keys, got {type(values).__name__}")
+    known = [f.name for f in fields(cls)]
+    for key in values:
+        if key not in known:
+            near = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean '{near[0]}'?)" if near else ""
+            raise error(f"{source}: unknown key '{key}'{hint}")
+    kwargs = {}
+    for f in fields(cls):
+        if f.name in values:
+            v = values[f.name]
+            if f.type in ("float", float) and isinstance(v, int) and not isinstance(v, bool):
+                v = float(v)
+            kwargs[f.name] = v
+    try:
+        return cls(**kwargs)
+    except error as e:
+        raise error(f"{source}: {e}") from None
+
+
+def config_from_yaml(cls, path, error: type[Exception], section: str):
+    """Load a configuration from YAML holding the keys at the top level or under ``section``."""
+    import yaml
+
+    path = Path(path)
+    try:
+        values = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as e:
+        raise error(f"{path}: cannot read the {section} configuration: {e}") from None
+    if isinstance(values, dict) and set(values) == {section}:
+        values = values[section] or {}
+    return config_from_dict(cls, values, error, str(path))

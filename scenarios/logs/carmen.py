@@ -173,7 +173,8 @@ def _robot_laser(words: list[str]) -> ScanRecord:
     """ROBOTLASER1/2: the scan's own angles and range limit, remissions, laser and robot pose."""
     name = words[0]
     head = _numbers(words, 2, 8, f"{name} start_angle fov resolution max_range accuracy mode")
-    start, _fov, resolution, max_range = head[0], head[1], head[2], head[3]
+    # head[1] is the field of view, which the beam count and resolution already imply
+    start, resolution, max_range = head[0], head[2], head[3]
     n = _count(words, 8, name)
     _check_length(words, 9 + n + 1, name, f"{n} ranges and a remission count")
     ranges = _numbers(words, 9, 9 + n, f"{name} range")

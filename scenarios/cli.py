@@ -36,10 +36,17 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_run(args) -> int:
+    from .observers import Observers
     from .runner import RunOptions, run_scenario
 
+    observers = []
+    if args.bag is not None:
+        from .logs.session_bags import SessionBagRecorder
+
+        observers.append(SessionBagRecorder(args.bag, args.bag_format))
     opts = RunOptions(out=args.out, seed=args.seed, sessions=args.sessions, quick=args.quick,
-                      progress=not args.no_progress)
+                      progress=not args.no_progress,
+                      observer=Observers(*observers) if observers else None)
     result = run_scenario(args.scenario, opts)
     print(f"wrote {result.out_dir}/report.md and metrics.json")
     return 0
@@ -76,7 +83,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run only the first K sessions")
     run.add_argument("--quick", action="store_true",
                      help="short routes that still keep every change in view (for CI)")
+    run.add_argument("--bag", type=Path, default=None,
+                     help="also write each update session as a ROS bag into this folder")
+    run.add_argument("--bag-format", choices=["ros1", "ros2"], default="ros1",
+                     help="bag format for --bag (default ros1)")
     run.add_argument("--no-progress", action="store_true", help="no progress bars")
+    run.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
+                     help="record the run for the rerun viewer")
+    run.add_argument("--rerun-spawn", action="store_true",
+                     help="show the run live in a rerun viewer (when there is a display)")
     run.set_defaults(func=_cmd_run)
 
     cmp_ = sub.add_parser("compare", help="CC, MS and OPDF of two map_server maps")

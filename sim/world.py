@@ -99,6 +99,7 @@ class World:
         self.people_contacts = 0    # step(): physics steps ending with a person at the robot
         self._started = False
         self._stepping = False
+        self._step = 0
 
     # --- state ------------------------------------------------------------------------------------
     @property
@@ -113,6 +114,17 @@ class World:
     @property
     def odom_pose(self) -> Pose2D:
         return self._odom
+
+    @property
+    def robot_pose(self) -> Pose2D:
+        """The robot's true pose at the end of the latest physics step (``true_pose`` is the one
+        at the latest message, which may fall inside a step)."""
+        return Pose2D(float(self._pose[0]), float(self._pose[1]), float(self._pose[2]))
+
+    @property
+    def elapsed(self) -> float:
+        """[s] simulated time at the end of the latest physics step."""
+        return self._step * self.physics_dt
 
     def people(self) -> np.ndarray:
         """(N, 3) x, y, radius of every person at the latest message's time."""
@@ -130,6 +142,16 @@ class World:
         without people; noise-free unless ``noise`` (drawn from a stream of its own)."""
         ranges = self.scans_without_people(robot_pose.as_array()[None], lidar, noise)[0]
         return lid.make_scan(ranges, self.scenario.robot.lidars[lidar], self._time)
+
+    def exact_scan(self, lidar: int = 0) -> Scan:
+        """The noise-free scan lidar ``lidar`` would take now from the robot's pose, people
+        included. Draws no random numbers, so looking does not change what comes next."""
+        spec = self.scenario.robot.lidars[lidar]
+        sensors = lid.sensor_poses(self._pose[None], spec.mount)
+        circles = np.concatenate([self.circles, self._people_now]) if len(self.crowd) \
+            else self.circles
+        exact = lid.cast_ranges(sensors, spec, self.segments, circles)[0]
+        return lid.make_scan(lid.measure(exact, spec, None), spec, self._time)
 
     def scans_without_people(self, robot_poses: np.ndarray, lidar: int = 0,
                              noise: bool = False) -> np.ndarray:

@@ -73,3 +73,21 @@ def test_step_messages_arrive_at_their_rates():
     scans = [m for m in msgs if isinstance(m, sim.ScanMsg)]
     assert len(odo) == 21 and len(scans) == 11 + 6    # t = 0 .. 1 s inclusive
     assert np.all(np.diff([m.time for m in msgs]) >= 0)
+
+
+def test_looking_draws_nothing_and_the_clocks_agree():
+    scn = scenario(CROWD)
+    a, b = sim.World(scn, 0, seed=3), sim.World(scn, 0, seed=3)
+    first = a.exact_scan(0)
+    assert first.ranges.shape == (541,) and np.isfinite(first.ranges).any()
+    for _ in range(5):
+        a.exact_scan(1)
+        assert [m.time for m in a.step(0.3, 0.2)] == [m.time for m in b.step(0.3, 0.2)]
+    assert record_scans(a) == record_scans(b)
+    assert a.elapsed == pytest.approx(5 * a.physics_dt)
+    assert a.robot_pose == b.robot_pose
+
+
+def record_scans(world):
+    return [m.scan.ranges.tobytes() for m in world.step(0.3, 0.0, n_steps=4)
+            if isinstance(m, sim.ScanMsg)]

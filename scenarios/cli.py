@@ -44,12 +44,30 @@ def _cmd_run(args) -> int:
         from .logs.session_bags import SessionBagRecorder
 
         observers.append(SessionBagRecorder(args.bag, args.bag_format))
+    recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
+    if recorder is not None:
+        observers.append(recorder)
     opts = RunOptions(out=args.out, seed=args.seed, sessions=args.sessions, quick=args.quick,
                       progress=not args.no_progress,
                       observer=Observers(*observers) if observers else None)
-    result = run_scenario(args.scenario, opts)
+    try:
+        result = run_scenario(args.scenario, opts)
+    finally:
+        if recorder is not None:
+            recorder.close()
     print(f"wrote {result.out_dir}/report.md and metrics.json")
+    if args.rerun:
+        print(f"wrote {args.rerun}: open it with `rerun {args.rerun}`")
     return 0
+
+
+def _rerun_recorder(args):
+    from .rerun_log import RerunRecorder, has_display
+
+    spawn = args.rerun_spawn and has_display()
+    if args.rerun_spawn and not spawn:
+        print("mapupdate run: no display here, the viewer is not opened", file=sys.stderr)
+    return RerunRecorder(args.rerun, spawn=spawn) if args.rerun or spawn else None
 
 
 def _cmd_update(args) -> int:

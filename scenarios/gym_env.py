@@ -1,0 +1,339 @@
+"""The gymnasium environment ``WarehouseMapUpdate-v0``: one update session of a scenario, with the
+robot driven by the agent. The only module of the project that imports gymnasium.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from gridmap import OccupancyGrid, Pose2D
+
+from .episode import (StepOutcome, UpdateSession, default_reward, initial_map,
+                      waypoints_reached)
+
+ENV_ID = "WarehouseMapUpdate-v0"
+PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE = 0, 205, 254   # map_server's trinary image values
+
+
+class WarehouseMapUpdateEnv(gym.Env):
+    """
+    ## Description
+
+    One session of a simulated warehouse (the paper's section V testbed): the session's changes
+    are applied to the world, people walk, and the agent drives the robot. Inside the
+    environment a Monte Carlo localiser tracks the robot on the reference map M_{i-1} and the
+    map updater turns that map into M_i from every scan, exactly as ``mapupdate run`` does; the
+    session is scored against the ground truth G_i with the runner's figures. The agent's job is
+    to drive so that the map gets updated well (and safely); ``RouteFollowingPolicy`` drives the
+    session's route as the runner's robot does.
+
+    ## Action Space
+
+    ``Box(2,)`` float32: ``[v, w]``, linear speed [m/s] in ``[-max_speed, max_speed]`` and turn
+    rate [rad/s] in ``[-max_turn_rate, max_turn_rate]`` of the scenario's robot (0.6 m/s and
+    1 rad/s in the built-in warehouse). Values outside are clipped. The command is held for
+    ``control_period`` seconds; a move into a wall or object is refused (the robot stays, and
+    may still turn) and counted as a collision. The robot pushes people aside.
+
+    ## Observation Space
+
+    A ``Dict``:
+
+    | key          | shape      | dtype   | low, high                 | unit        | what |
+    |--------------|------------|---------|---------------------------|-------------|------|
+    | ``scan``     | (beams,)   | float32 | 0, range_max              | m           | latest scan of lidar 0, no return = range_max |
+    | ``scan_k``   | (beams_k,) | float32 | 0, range_max_k            | m           | latest scan of lidar k >= 1, if any |
+    | ``odometry`` | (3,)       | float32 | world bounds +- diagonal; -pi, pi | m, m, rad | x, y, yaw in the drifting odom frame |
+    | ``estimate`` | (3,)       | float32 | world bounds +- diagonal; -pi, pi | m, m, rad | localiser's pose in the map frame |
+    | ``map``      | (H, W)     | uint8   | 0, 255                    | -           | with ``map_observation=True``: M_i as it stands, north up, 0 occupied, 205 unknown, 254 free |
+
+    At reset, before the first step, ``scan`` is the noise-free scan from the start pose.
+
+    ## Rewards
+
+    ``reward_fn(StepOutcome) -> float``; the default, ``episode.default_reward``, is the number
+    of map cells the step changed correctly minus those it changed wrongly (judged against G_i
+    as the change-detection score judges them), minus 10 per refused move, 1 per physics step
+    that ends with a person touching the robot, and 5 per second during which the estimate is
+    more than ``lost_distance`` from the truth.
+
+    ## Starting State
+
+    The robot at the scenario's dock (``robot.start``); the localiser initialised around it with
+    the runner's spread; people where the session's seed puts them. ``reset(seed=s)`` plays the
+    session the runner plays with ``--seed s`` (the same world, odometry, lidar noise and
+    localiser draws); without a seed, the episode's seed is drawn from ``self.np_random``.
+
+    ## Episode End
+
+    Terminated when the robot has passed the session's route waypoints in order (within
+    ``waypoint_tolerance``, the last within ``goal_tolerance``) and is commanded to stand still
+    (``v = w = 0``), as the runner's robot ends its session. Truncated at the session's time
+    limit (``max_duration``, or three times the route at full speed plus time for turns). The
+    last step's ``info["scores"]`` holds the session's entry of the runner's ``metrics.json``.
+
+    Info of every step: ``time`` [s], ``true_pose``, ``estimated_pose``, ``odometry_pose``
+    (3,) arrays, ``localization_error`` [m], ``cells_changed``, ``correct_changes``,
+    ``wrong_changes``, ``updater_changed_cells`` (the decision rule's count), ``collisions``,
+    ``people_contacts`` (so far), ``scans`` (this step), ``waypoints_reached``, ``seed``.
+
+    ## Arguments
+
+    ```python
+    gymnasium.make("WarehouseMapUpdate-v0", scenario="aws_small_warehouse", session="W2")
+    ```
+
+    * ``scenario``: built-in name, YAML path or ``sim.Scenario`` (default: the warehouse).
+    * ``session``: an update session's name or index (default 1, the first after mapping).
+    * ``quick``: cut the update routes as ``mapupdate run --quick`` does.
+    * ``reference_map``: M_{i-1} (``OccupancyGrid`` or map_server YAML); default M1, built by the
+      mapping session as the runner builds it (kept per scenario and seed).
+    * ``initial_map``: M1 for the runner's second localiser; default the reference map if one
+      is given, else M1.
+    * ``map_seed``: seed of the mapping run that builds M1 (default: the episode's seed).
+    * ``control_period``: [s] how long an action is held, a whole number of physics steps
+      (default one step, 0.05 s in the warehouse: the rate the runner's robot is driven at).
+    * ``map_observation``: add the map image to the observation.
+    * ``reward_fn``: see Rewards. ``lost_distance`` [m] (0.5).
+    * ``waypoint_tolerance`` [m] (0.3), ``goal_tolerance`` [m] (0.05): see Episode End.
+    * ``updater_config``, ``localizer_config``: as for the runner.
+    * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
+
+    ## Version History
+
+    * v0: initial version.
+
+    ## Example
+
+    >>> import gymnasium, scenarios
+    >>> env = gymnasium.make("WarehouseMapUpdate-v0", session="W2", quick=True)  # doctest: +SKIP
+    >>> obs, info = env.reset(seed=7)                                           # doctest: +SKIP
+    >>> obs, reward, terminated, truncated, info = env.step([0.3, 0.0])         # doctest: +SKIP
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(self, scenario=None, session: int | str = 1, *, quick: bool = False,
+                 reference_map: OccupancyGrid | str | Path | None = None,
+                 initial_map: OccupancyGrid | str | Path | None = None,
+                 map_seed: int | None = None, control_period: float | None = None,
+                 map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
+                 waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
+                 updater_config=None, localizer_config=None, render_mode: str | None = None,
+                 render_scale: int = 2):
+        import sim
+
+        self.scenario = _load_scenario(scenario, quick)
+        self.session_index = self.scenario.session_index(session)
+        if self.scenario.sessions[self.session_index].mapping:
+            raise sim.ScenarioError(f"session {self.scenario.sessions[self.session_index].name!r}"
+                                    f" builds the initial map; choose an update session")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of "
+                             f"{self.metadata['render_modes']}")
+        self.render_mode, self.render_scale = render_mode, int(render_scale)
+        self._reference = _load_grid(reference_map, "reference_map")
+        self._initial = _load_grid(initial_map, "initial_map")
+        self._map_seed = map_seed
+        dt = 1.0 / self.scenario.physics_hz
+        period = dt if control_period is None else float(control_period)
+        self._n_physics = round(period / dt)
+        if self._n_physics < 1 or abs(self._n_physics * dt - period) > 1e-9:
+            raise ValueError(f"control_period {period} s is not a whole number of physics steps "
+                             f"of {dt} s")
+        self.control_period = self._n_physics * dt
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.control_period}
+        self._map_observation = bool(map_observation)
+        self._reward_fn = default_reward if reward_fn is None else reward_fn
+        self.lost_distance = float(lost_distance)
+        self.waypoint_tolerance, self.goal_tolerance = float(waypoint_tolerance), \
+            float(goal_tolerance)
+        self._updater_config, self._localizer_config = updater_config, localizer_config
+        self._route = np.asarray(self.scenario.sessions[self.session_index].route, np.float64)
+        self.action_space, self.observation_space = self._spaces()
+        self.world = None
+        self.session = None
+        self._done = True
+
+    # --- spaces ---------------------------------------------------------------------------------
+    def _spaces(self):
+        robot = self.scenario.robot
+        high = np.array([robot.max_speed, robot.max_turn_rate], np.float32)
+        action = spaces.Box(-high, high, dtype=np.float32)
+        x0, y0, x1, y1 = self.scenario.world.bounds
+        diag = math.hypot(x1 - x0, y1 - y0)
+        self._pose_low = np.array([x0 - diag, y0 - diag, -math.pi], np.float32)
+        self._pose_high = np.array([x1 + diag, y1 + diag, math.pi], np.float32)
+        obs = {}
+        for k, lidar in enumerate(robot.lidars):
+            obs["scan" if k == 0 else f"scan_{k}"] = spaces.Box(
+                0.0, np.float32(lidar.range_max), (lidar.beams,), np.float32)
+        pose = spaces.Box(self._pose_low, self._pose_high, dtype=np.float32)
+        obs["odometry"] = pose
+        obs["estimate"] = pose
+        if self._map_observation:
+            import sim
+
+            obs["map"] = spaces.Box(0, 255, sim.grid_frame(self.scenario).shape, np.uint8)
+        return action, spaces.Dict(obs)
+
+    # --- the gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        import sim
+
+        from .runner import _session_seeds
+
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"reset() takes no options, got {sorted(options)}")
+        episode_seed = int(seed) if seed is not None else int(self.np_random.integers(2**31 - 1))
+        scn, i = self.scenario, self.session_index
+        reference = self._reference
+        if reference is None:
+            reference = initial_map(scn, episode_seed if self._map_seed is None
+                                    else int(self._map_seed))
+        initial = self._initial if self._initial is not None else reference
+        seeds = _session_seeds(episode_seed, len(scn.sessions))
+        self.world = sim.World(scn, i, seeds[i]["world"])
+        self.session = UpdateSession(scn, i, self.world, reference, initial, episode_seed,
+                                     self._updater_config, self._localizer_config)
+        self._seed = episode_seed
+        self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
+        self._next_waypoint = 0
+        self._done = False
+        return self._observation(), self._info(0)
+
+    def step(self, action):
+        import sim
+
+        if self._done:
+            raise RuntimeError("the episode has ended (or never started): call reset()")
+        a = np.asarray(action, dtype=np.float64).reshape(2)   # float64: commands kept exact
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {action!r}")
+        robot = self.scenario.robot
+        v = min(max(float(a[0]), -robot.max_speed), robot.max_speed)
+        w = min(max(float(a[1]), -robot.max_turn_rate), robot.max_turn_rate)
+        world, session = self.world, self.session
+        # waypoints are checked at the pose the command starts from, as the route follower does
+        self._next_waypoint = waypoints_reached(self._route, self._next_waypoint,
+                                                world.robot_pose, self.waypoint_tolerance,
+                                                self.goal_tolerance)
+        collisions, contacts, tally = world.collisions, world.people_contacts, session.tally
+        scans = 0
+        for msg in world.drive(v, w, self._n_physics):
+            if isinstance(msg, sim.ScanMsg):
+                session.add_scan(msg)
+                self._scans[msg.lidar] = msg.scan
+                scans += 1
+        route_done = self._next_waypoint >= len(self._route)
+        terminated = route_done and v == 0.0 and w == 0.0
+        truncated = not terminated and world.elapsed >= world.time_limit - 1e-9
+        error = session.localization_error()
+        outcome = StepOutcome(
+            dt=self.control_period, correct_gain=session.tally.correct - tally.correct,
+            wrong_gain=session.tally.wrong - tally.wrong,
+            collisions=world.collisions - collisions,
+            people_contacts=world.people_contacts - contacts, localization_error=error,
+            lost=error > self.lost_distance, scans=scans, route_done=route_done)
+        reward = float(self._reward_fn(outcome))
+        info = self._info(scans)
+        if terminated or truncated:
+            self._done = True
+            info["scores"] = session.scores()
+        return self._observation(), reward, terminated, truncated, info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from .topview import scan_points, top_view
+
+        session, world = self.session, self.world
+        if session is None:
+            raise RuntimeError("call reset() before render()")
+        points = verdicts = None
+        msg, report = session.last_scan, session.last_report
+        if msg is not None:
+            est = session.trajectory.previous_map[-1]
+            sensor = Pose2D.from_array(est).compose(session.mounts[msg.lidar])
+            points = scan_points(msg.scan.ranges, msg.scan.angles(), sensor)
+            verdicts = report.verdicts
+        return top_view(session.updated_map, session.reference, people=world.people(),
+                        robot=world.true_pose, robot_radius=self.scenario.robot.radius,
+                        estimate=session.estimate(), points=points, verdicts=verdicts,
+                        scale=self.render_scale)
+
+    # --- observation and info -------------------------------------------------------------------
+    def _pose_obs(self, pose: Pose2D) -> np.ndarray:
+        return np.clip(pose.as_array(), self._pose_low, self._pose_high).astype(np.float32)
+
+    def _observation(self) -> dict:
+        obs = {}
+        for k, scan in enumerate(self._scans):
+            r = np.where(np.isfinite(scan.ranges), scan.ranges, scan.range_max)
+            obs["scan" if k == 0 else f"scan_{k}"] = np.clip(r, 0.0, scan.range_max).astype(
+                np.float32)
+        obs["odometry"] = self._pose_obs(self.world.odom_pose)
+        obs["estimate"] = self._pose_obs(self.session.estimate())
+        if self._map_observation:
+            d = self.session.updated_map.data[::-1]
+            img = np.full(d.shape, PGM_UNKNOWN, np.uint8)
+            img[d == 0] = PGM_FREE
+            img[d == 100] = PGM_OCCUPIED
+            obs["map"] = img
+        return obs
+
+    def _info(self, scans: int) -> dict:
+        world, session = self.world, self.session
+        tally = session.tally
+        return {
+            "time": float(world.time),
+            "true_pose": world.true_pose.as_array(),
+            "estimated_pose": session.estimate().as_array(),
+            "odometry_pose": world.odom_pose.as_array(),
+            "localization_error": session.localization_error(),
+            "cells_changed": tally.correct + tally.wrong,
+            "correct_changes": tally.correct,
+            "wrong_changes": tally.wrong,
+            "updater_changed_cells": int(session.updater.n_changed),
+            "collisions": int(world.collisions),
+            "people_contacts": int(world.people_contacts),
+            "scans": int(scans),
+            "waypoints_reached": int(self._next_waypoint),
+            "seed": self._seed,
+        }
+
+
+def _load_scenario(scenario, quick: bool):
+    import sim
+
+    from .catalog import find_scenario
+
+    scn = scenario if isinstance(scenario, sim.Scenario) else \
+        sim.load_scenario(find_scenario(scenario))
+    return sim.quick_variant(scn) if quick else scn
+
+
+def _load_grid(value, name: str) -> OccupancyGrid | None:
+    if value is None or isinstance(value, OccupancyGrid):
+        return value
+    if isinstance(value, (str, Path)):
+        from gridmap import load_map
+
+        return load_map(value)
+    raise TypeError(f"{name} must be an OccupancyGrid or a map_server YAML path, got "
+                    f"{type(value).__name__}")
+
+
+def register() -> None:
+    """Register ``WarehouseMapUpdate-v0`` with gymnasium (once)."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="scenarios.gym_env:WarehouseMapUpdateEnv")
+
+
+register()

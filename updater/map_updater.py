@@ -18,7 +18,8 @@ zeroing a map-sized array.
 
 Bad input: NaN, inf, negative and zero ranges are invalid beams. A non-finite sensor pose,
 odometry pose or scan time raises ``UpdaterError`` before anything is changed. A sensor pose
-off the map is a counted skip (``ScanReport.reason == "sensor off the map"``).
+off the map is a counted skip (``ScanReport.reason == "sensor off the map"``), and so is a pose
+the caller's ``pose_check`` does not trust (e.g. ``localization.confidence.PoseCheck``).
 """
 
 from __future__ import annotations
@@ -26,12 +27,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from gridmap import OccupancyGrid, Pose2D, Scan
+from gridmap import GridError, OccupancyGrid, Pose2D, Scan
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
@@ -52,7 +55,7 @@ class ScanReport:
 
     time: float                    # [s] the scan's time
     processed: bool                # classified; False: gated or skipped, see ``reason``
-    reason: str = ""               # why not processed (gating.GATED_*, "sensor off the map")
+    reason: str = ""               # why not processed: gating.GATED_*, off the map, pose check
     valid_beams: int = 0
     detected_changes: int = 0      # beams kept as detected changes by the run filter
     raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
@@ -107,10 +110,15 @@ class MapUpdater:
         self._ws = steps.Workspace()
 
     # --- the per-scan call --------------------------------------------------------------------
-    def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None
-                ) -> ScanReport:
+    def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None,
+                pose_check: Callable[[], str] | None = None) -> ScanReport:
         """Gate, classify, flag, push and decide for one scan. See the module docstring for
-        bad input."""
+        bad input.
+
+        ``pose_check``, when given, is asked only for scans that pass the gate (so a costly
+        check runs a few times per metre, not at the scan rate): it returns "" when the pose
+        can be trusted, else a reason, and the scan is then a counted skip that, like a lost
+        scan, does not advance the gate."""
         self._check_input(scan, sensor_pose, odometry)
         cfg = self.config
         self._counts["scans"] += 1
@@ -126,6 +134,10 @@ class MapUpdater:
         if not (0 <= sensor[0] < width and 0 <= sensor[1] < height):
             self._counts["skipped"] += 1
             return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
+        reason = pose_check() if pose_check is not None else ""
+        if reason:
+            self._counts["skipped"] += 1
+            return ScanReport(t, False, reason, changed_cells=self._n_changed)
 
         beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
         self._counts["processed"] += 1
@@ -172,7 +184,7 @@ class MapUpdater:
     @property
     def stats(self) -> dict:
         """Counts of scans: seen, processed (classified), gated, lost (processed, then dropped
-        by the lost check), skipped (sensor off the map)."""
+        by the lost check), skipped (sensor off the map, or refused by the pose check)."""
         return dict(self._counts)
 
     def updated_map(self) -> OccupancyGrid:
@@ -222,9 +234,11 @@ class MapUpdater:
                 f.flush()
                 os.fsync(f.fileno())
             os.replace(tmp, path)
-        except OSError as e:
+        except BaseException as e:      # interrupted too: never leave the temporary file
             tmp.unlink(missing_ok=True)
-            raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
+            if isinstance(e, OSError):
+                raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
+            raise
 
     @classmethod
     def load(cls, path) -> MapUpdater:
@@ -234,13 +248,22 @@ class MapUpdater:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 ref, hist = z["reference"], z["hist"]
-        except (OSError, KeyError, ValueError) as e:
+        # a truncated or foreign file: zipfile and numpy raise these (EOFError when empty)
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:
             raise UpdaterError(f"{path}: not a readable updater state file: {e}") from None
-        if meta.get("format") != STATE_FORMAT:
-            raise UpdaterError(f"{path}: state format {meta.get('format')!r}, expected "
-                               f"{STATE_FORMAT}")
+        if not isinstance(meta, dict) or meta.get("format") != STATE_FORMAT:
+            got = meta.get("format") if isinstance(meta, dict) else None
+            raise UpdaterError(f"{path}: state format {got!r}, expected {STATE_FORMAT}")
+        missing = [k for k in ("config", "resolution", "origin", "gate", "counts")
+                   if k not in meta]
+        if missing:
+            raise UpdaterError(f"{path}: state lacks {', '.join(missing)}")
         config = UpdaterConfig.from_dict(meta["config"], source=str(path))
-        updater = cls(OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"])), config)
+        try:
+            grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))
+        except (GridError, TypeError, ValueError) as e:
+            raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
+        updater = cls(grid, config)
         if hist.shape != ref.shape or hist.dtype != np.uint16 or \
                 np.any(hist & ~np.uint16(steps.buffer_mask(config))):
             raise UpdaterError(f"{path}: buffers do not fit the reference map and config")
@@ -249,7 +272,10 @@ class MapUpdater:
             updater._hist.reshape(-1), updater._ref.reshape(-1), ref.shape[1], config)
         try:
             updater._gate.restore(meta["gate"])
-        except ValueError as e:
+        except (ValueError, TypeError) as e:
             raise UpdaterError(f"{path}: {e}") from None
-        updater._counts = {k: int(meta["counts"][k]) for k in updater._counts}
+        try:
+            updater._counts = {k: int(meta["counts"][k]) for k in updater._counts}
+        except (KeyError, TypeError, ValueError) as e:
+            raise UpdaterError(f"{path}: scan counts unreadable: {e}") from None
         return updater

@@ -1,0 +1,156 @@
+"""How far a pose can be trusted with the map: a figure a caller can gate on before it lets the
+map updater change the map from that pose.
+
+A localiser that is wrong with confidence (a persistent 10 cm or 1 deg offset, a kidnapping)
+keeps a tight particle cloud, so its covariance says nothing; and most beams still pair with the
+map, so the updater's own lost check (80 % of the beams) says nothing either. Yet a persistent
+10 cm offset makes the updater free wall and rack cells (benchmarks/bench_mislocalisation.py).
+
+What does tell is the scan itself. Placed at the right pose, the beams that hit what the map
+knows end close to its occupied cells, and moving the pose can only make them fit worse. Placed
+at a wrong pose, some nearby pose fits clearly better. So:
+
+- ``fit`` [1]: the mean over the scan's beams of (min(d, cap) / cap)^2, d the distance [m] from
+  a beam's end point to the nearest occupied cell of the map; 0 is a perfect fit, 1 no fit.
+  Beams that hit something the map does not have sit at the cap wherever the pose is, so a
+  changed world raises the fit but does not tilt it towards another pose.
+- ``gain`` [1]: how much the best pose of a small grid around the given one (fine: +-0.2 m,
+  +-2 deg; coarse: +-1 m, +-12 deg) lowers the fit. It is 0 when the given pose is the best one.
+- ``correction``: the offset (dx, dy [m], dtheta [rad], map frame) to that best pose.
+
+``PoseCheck.check`` turns these, and the localiser's covariance when there is one, into a reason
+to skip the scan ("" when the pose can be trusted). It imports only ``gridmap``; the scoring is
+the localiser's likelihood-field kernel with a table of its own, one call per grid of poses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D, Scan
+from gridmap.distance import distance_to_occupied
+
+from .config import LocalizationError
+from .sensor import select_beams
+
+# Why a pose was not trusted (returned by PoseCheck.check).
+UNSURE_FIT = "pose unsure: a nearby pose fits the scan better"
+UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
+
+
+@dataclass(frozen=True)
+class PoseCheckConfig:
+    """Thresholds of the pose check. Measured on the warehouse's W2 route at the true poses
+    plus an offset (benchmarks/bench_mislocalisation.py), the defaults refuse 1 % of the scans
+    without an offset, 6 % at 0.5 deg, 30 % at 5 cm, and 98-100 % from 7.5 cm or 1 deg on."""
+
+    max_gain: float = 0.01              # [1] a better pose this much better: the pose is off ...
+    min_correction: float = 0.06        # [m] ... when it lies at least this far away
+    min_correction_deg: float = 0.75    # [deg] ... or turned at least this much
+    cap: float = 0.2                    # [m] beam residuals are capped here
+    max_beams: int = 180                # beams scored, evenly spread over the scan
+    fine_step: float = 0.025            # [m] steps of the fine search grid ...
+    fine_steps: int = 8                 # ... this many each way (+-0.2 m)
+    fine_step_deg: float = 0.5          # [deg] heading steps of the fine grid ...
+    fine_steps_deg: int = 4             # ... this many each way (+-2 deg)
+    coarse_step: float = 0.25           # [m] the coarse grid, for gross errors: +-1 m ...
+    coarse_steps: int = 4
+    coarse_step_deg: float = 3.0        # [deg] ... +-12 deg
+    coarse_steps_deg: int = 4
+    max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
+    max_yaw_std_deg: float = 5.0        # [deg]
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.type == "int":
+                ok = isinstance(v, int) and not isinstance(v, bool) and v >= (
+                    2 if f.name == "max_beams" else 0)
+            else:
+                ok = isinstance(v, (int, float)) and not isinstance(v, bool) and \
+                    math.isfinite(v) and v >= 0
+            if not ok:
+                raise LocalizationError(f"pose check key '{f.name}' must be a "
+                                        f"{'whole' if f.type == 'int' else 'finite'} number "
+                                        f">= 0, got {v!r}")
+        if self.cap <= 0:
+            raise LocalizationError(f"pose check key 'cap' must be > 0, got {self.cap!r}")
+
+
+@dataclass(frozen=True)
+class PoseFit:
+    fit: float              # [1] at the given pose, 0 perfect .. 1 nothing fits
+    gain: float             # [1] how much the best pose nearby lowers it
+    correction: Pose2D      # offset to that best pose (dx, dy [m], dtheta [rad], map frame)
+    beams: int              # beams scored
+
+
+def search_grid(step: float, steps: int, step_rad: float, steps_rad: int) -> np.ndarray:
+    """Offsets (N, 3) of a regular grid, (2 steps + 1)^2 positions x (2 steps_rad + 1) headings;
+    row 0 is the zero offset."""
+    xy = step * np.arange(-steps, steps + 1)
+    th = step_rad * np.arange(-steps_rad, steps_rad + 1)
+    grid = np.array(np.meshgrid(xy, xy, th, indexing="ij")).reshape(3, -1).T
+    zero = np.flatnonzero(~grid.any(axis=1))
+    return np.ascontiguousarray(np.vstack([grid[zero], np.delete(grid, zero, axis=0)]))
+
+
+class PoseCheck:
+    """The pose check on one map. ``fit`` scores a pose; ``check`` says whether to trust it."""
+
+    def __init__(self, grid: OccupancyGrid, config: PoseCheckConfig | None = None):
+        if not isinstance(grid, OccupancyGrid):
+            raise LocalizationError(f"the map must be an OccupancyGrid, got {type(grid).__name__}")
+        self.config = PoseCheckConfig() if config is None else config
+        if not isinstance(self.config, PoseCheckConfig):
+            raise LocalizationError(f"config must be a PoseCheckConfig, got "
+                                    f"{type(config).__name__}")
+        c = self.config
+        residual = distance_to_occupied(grid, c.cap) / np.float32(c.cap)
+        # The kernel sums table entries: the negative squared residual, so higher is better.
+        self._table = np.ascontiguousarray(-(residual * residual), dtype=np.float32)
+        self._frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
+        self._offsets = np.vstack([
+            search_grid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
+                        c.fine_steps_deg),
+            search_grid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
+                        c.coarse_steps_deg)[1:]])
+
+    def fit(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
+        """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
+        ``sensor_mount`` (robot frame), and the best pose of the search grids around it; None
+        when the scan has no valid beam."""
+        from . import _kernels
+
+        beams = select_beams(scan, self.config.max_beams)
+        if beams.count == 0:
+            return None
+        poses = robot_pose.as_array() + self._offsets
+        score = np.empty(poses.shape[0])
+        _kernels.likelihood_field(poses, sensor_mount.as_array(), beams.points, self._table,
+                                  self._frame, -1.0, 0.0, score)
+        score /= -beams.count
+        best = int(np.argmin(score))
+        dx, dy, dth = self._offsets[best]
+        return PoseFit(float(score[0]), float(score[0] - score[best]),
+                       Pose2D(float(dx), float(dy), float(dth)), beams.count)
+
+    def check(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+              cov: np.ndarray | None = None) -> str:
+        """"" when the pose can be trusted with the map, else why not (UNSURE_*)."""
+        c = self.config
+        if cov is not None:
+            cov = np.asarray(cov, np.float64)
+            if not np.all(np.isfinite(cov)) or \
+                    np.linalg.eigvalsh(cov[:2, :2]).max() > c.max_position_std ** 2 or \
+                    cov[2, 2] > math.radians(c.max_yaw_std_deg) ** 2:
+                return UNSURE_COVARIANCE
+        f = self.fit(scan, robot_pose, sensor_mount)
+        if f is None:
+            return ""
+        far = math.hypot(f.correction.x, f.correction.y) >= c.min_correction - 1e-9 or \
+            abs(f.correction.theta) >= math.radians(c.min_correction_deg) - 1e-9
+        return UNSURE_FIT if f.gain > c.max_gain and far else ""

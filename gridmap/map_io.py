@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -179,6 +178,8 @@ def read_pgm(path) -> tuple[np.ndarray, int]:
             pixels = np.array([int(t) for t in tokens[:n]], dtype=np.int64)
         except ValueError:
             raise MapFileError(f"{path}: bad pixel data: non-integer value in P2 image") from None
+        except OverflowError:   # a value beyond int64 is beyond any maxval too
+            raise MapFileError(f"{path}: bad pixel data: values outside 0..{maxval}") from None
     if pixels.max(initial=0) > maxval or pixels.min(initial=0) < 0:
         raise MapFileError(f"{path}: bad pixel data: values outside 0..{maxval}")
     return pixels.astype(np.uint16).reshape(height, width), int(maxval)
@@ -291,18 +292,22 @@ def save_map(grid: OccupancyGrid, path) -> tuple[Path, Path]:
 
 
 def _write_atomically(path: Path, content: bytes) -> None:
-    folder = path.resolve().parent
+    """Write to a temporary file beside ``path``, flush it to disk and rename it into place,
+    so ``path`` is always either the old file or the new one, complete. The temporary file is
+    opened like any other (not with mkstemp's owner-only mode), so a map_server running as
+    another user can read the map."""
+    tmp = path.resolve().parent / f".{path.name}.{os.getpid()}.tmp"
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    except OSError as e:
-        raise MapFileError(f"{path}: cannot write ({e})") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
+        with open(tmp, "wb") as f:
             f.write(content)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
-    except OSError as e:
-        Path(tmp).unlink(missing_ok=True)
-        raise MapFileError(f"{path}: cannot write ({e})") from None
+    except BaseException as e:
+        tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise MapFileError(f"{path}: cannot write ({e})") from None
+        raise
 
 
 # --- helpers -----------------------------------------------------------------------------------

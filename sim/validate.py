@@ -2,8 +2,9 @@
 
 Every session's world must have: unique object ids, changes that refer to movable objects that
 exist at that point, every object inside the walls, no two objects sharing area, a robot start
-clear of objects, and robot and people routes whose legs keep the walker's disc clear of every
-object (a waypoint inside an object is reported as such).
+clear of objects, and robot and people routes whose waypoints keep the walker's disc inside the
+walls and whose legs keep it clear of every object (a waypoint inside an object is reported as
+such).
 """
 
 from __future__ import annotations
@@ -46,12 +47,14 @@ def check_scenario(scn, fail: Fail) -> None:
             _check_objects(scn, objs, keys, fail, f"session {s.name!r}")
             _check_start(scn, objs, keys, fail, s.name)
         _check_path(scn.robot.radius, _robot_path(scn, s), objs, f"{skey}.route",
-                    f"the robot (radius {scn.robot.radius} m)", fail, skip_first=True)
+                    f"the robot (radius {scn.robot.radius} m)", fail, skip_first=True,
+                    bounds=scn.world.bounds)
         for p, person in enumerate(s.people):
             pkey = f"{skey}.people[{p}]"
             if person.route is not None:
                 _check_path(person.radius, list(person.route), objs, f"{pkey}.route",
-                            f"a person (radius {person.radius} m)", fail, closed=person.loop)
+                            f"a person (radius {person.radius} m)", fail, closed=person.loop,
+                            bounds=scn.world.bounds)
             else:
                 x0, y0, x1, y1 = person.wander
                 b = scn.world.bounds
@@ -118,13 +121,22 @@ def _robot_path(scn, session) -> list[tuple[float, float]]:
 
 
 def _check_path(radius, pts, objs, key, who, fail: Fail, skip_first: bool = False,
-                closed: bool = False) -> None:
+                closed: bool = False, bounds=None) -> None:
     """Each waypoint outside every object and each leg at least ``radius`` from every object.
+    With ``bounds`` each waypoint also keeps ``radius`` from the walls (the building is a
+    rectangle, so its legs then do too): a route the walker cannot reach is refused.
     With ``skip_first`` the first point is the robot's start (checked apart) and waypoint
     numbers count from the next one; ``closed`` adds the leg from the last point to the first."""
     first = 1 if skip_first else 0
     for j in range(first, len(pts)):
         wkey = f"{key}[{j - first}]"
+        if bounds is not None:
+            x, y = pts[j]
+            if not (bounds[0] + radius - geo.TOUCH_TOL <= x <= bounds[2] - radius + geo.TOUCH_TOL
+                    and bounds[1] + radius - geo.TOUCH_TOL <= y
+                    <= bounds[3] - radius + geo.TOUCH_TOL):
+                fail(wkey, f"waypoint {list(pts[j])}: {who} does not fit inside the walls "
+                           f"{list(bounds)} there")
         for o in objs:
             d = _distance_to(o, pts[j])
             if d < 0:

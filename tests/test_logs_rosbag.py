@@ -159,7 +159,9 @@ def _msg(ts, rec):
         sec=int(rec.time), nanosec=int(round((rec.time % 1) * 1e9))), frame_id="laser")
     s = rec.scan
     return T["sensor_msgs/msg/LaserScan"](
-        header=hdr, angle_min=s.angle_min, angle_max=0.0, angle_increment=s.angle_increment,
+        header=hdr, angle_min=s.angle_min,
+        angle_max=s.angle_min + (s.beams - 1) * s.angle_increment,
+        angle_increment=s.angle_increment,
         time_increment=0.0, scan_time=0.0, range_min=s.range_min, range_max=s.range_max,
         ranges=s.ranges, intensities=np.zeros(0, np.float32))
 

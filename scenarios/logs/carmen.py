@@ -174,8 +174,9 @@ def _robot_laser(words: list[str]) -> ScanRecord:
     name = words[0]
     head = _numbers(words, 2, 8, f"{name} start_angle fov resolution max_range accuracy mode")
     # head[1] is the field of view, which the beam count and resolution already imply
-    start, resolution, max_range = head[0], head[2], head[3]
+    start, fov, resolution, max_range = head[0], head[1], head[2], head[3]
     n = _count(words, 8, name)
+    _check_fan(fov, resolution, n, name)
     _check_length(words, 9 + n + 1, name, f"{n} ranges and a remission count")
     ranges = _numbers(words, 9, 9 + n, f"{name} range")
     m = _count(words, 9 + n, f"{name} remission")
@@ -229,6 +230,15 @@ def _count(words: list[str], i: int, what: str) -> int:
         raise _LineProblem("wrong beam count", f"{words[0]} field {i + 1}: {what} count {n} "
                                                "is out of range")
     return n
+
+
+def _check_fan(fov: float, increment: float, n: int, name: str) -> None:
+    """The beam count must fit the angles: lasers log ``fov = (n - 1) * increment`` (a beam at
+    each edge) or ``n * increment``; more than a beam and a half off means a corrupt line, whose
+    beams would be placed at the wrong angles."""
+    if n > 1 and abs(abs(fov) - (n - 1) * abs(increment)) > 1.5 * abs(increment) + 1e-6:
+        raise _LineProblem("wrong beam count", f"{name} has {n} beams {increment:g} rad apart, "
+                                               f"which does not fit its field of view {fov:g} rad")
 
 
 def _check_length(words: list[str], need: int, name: str, declared: str) -> None:

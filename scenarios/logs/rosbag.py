@@ -206,6 +206,14 @@ def _scan_record(msg, topic: str) -> ScanRecord:
                     float(msg.range_min), float(msg.range_max), t)
     except GridError as e:
         raise LogError(str(e)) from None
+    # angle_max is redundant, so it tells a corrupt message: more than a beam and a half away
+    # from the last beam's angle (drivers differ by one beam) and the beams would be misplaced.
+    last = float(msg.angle_min) + (scan.beams - 1) * float(msg.angle_increment)
+    if scan.beams > 1 and not abs(float(msg.angle_max) - last) <= \
+            1.5 * abs(float(msg.angle_increment)) + 1e-6:
+        raise LogError(f"{scan.beams} ranges {float(msg.angle_increment):g} rad apart from "
+                       f"angle_min {float(msg.angle_min):g} do not reach angle_max "
+                       f"{float(msg.angle_max):g} (wrong beam count)")
     return ScanRecord(t, scan, frame_id=msg.header.frame_id.lstrip("/"), topic=topic)
 
 

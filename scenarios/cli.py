@@ -36,6 +36,7 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_run(args) -> int:
+    from .checkpoint import ResumeError
     from .observers import Observers
     from .runner import RunOptions, run_scenario
 
@@ -47,9 +48,13 @@ def _cmd_run(args) -> int:
     recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
     if recorder is not None:
         observers.append(recorder)
-    opts = RunOptions(out=args.out, seed=args.seed, sessions=args.sessions, quick=args.quick,
-                      progress=not args.no_progress,
-                      observer=Observers(*observers) if observers else None)
+    if args.resume is not None and args.out is not None and args.out != args.resume:
+        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
+    given = {} if args.pose_check is None else {"pose_check": args.pose_check}
+    opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
+                      quick=args.quick, progress=not args.no_progress,
+                      observer=Observers(*observers) if observers else None,
+                      resume=args.resume is not None, **given)
     try:
         result = run_scenario(args.scenario, opts)
     finally:
@@ -106,6 +111,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--bag-format", choices=["ros1", "ros2"], default="ros1",
                      help="bag format for --bag (default ros1)")
     run.add_argument("--no-progress", action="store_true", help="no progress bars")
+    run.add_argument("--resume", type=Path, default=None, metavar="DIR",
+                     help="continue the killed run in DIR after its last finished session")
+    run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
+                     help="skip scans whose pose the scan's fit to the map or the localiser's "
+                          "covariance calls unsure (default: off)")
     run.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",
@@ -149,6 +159,7 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     for module, name in (("gridmap", "GridError"), ("sim", "ScenarioError"),
                          ("updater", "UpdaterError"), ("localization", "LocalizationError"),
                          ("scenarios.catalog", "ScenarioNotFound"),
+                         ("scenarios.checkpoint", "ResumeError"),
                          ("scenarios.logs", "LogError")):
         mod = sys.modules.get(module)
         if mod is not None and hasattr(mod, name):

@@ -10,7 +10,6 @@ import json
 import math
 import os
 import platform
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,14 +18,19 @@ from gridmap import FREE, OCCUPIED, OccupancyGrid
 
 
 def atomic_write_text(path: Path, text: str) -> None:
+    """``path`` is always either the old file or the new one, complete: the text goes to a
+    temporary file beside it (opened normally, so it gets the usual permissions rather than
+    mkstemp's owner-only ones), flushed to disk, renamed into place."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = path.parent / f".{path.name}.{os.getpid()}.tmp"
     try:
-        with os.fdopen(fd, "w") as f:
+        with open(tmp, "w") as f:
             f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
@@ -43,9 +47,13 @@ def write_session_maps(out_dir: Path, result) -> None:
         save_map(result.oracle, maps / f"oracle_{idx}.yaml")
     if result.masks:
         # per-cell evaluation masks, for anyone who wants to recompute or inspect the scores
-        tmp = maps / f".masks_{idx}.tmp.npz"
-        np.savez_compressed(tmp, **result.masks)
-        os.replace(tmp, maps / f"masks_{idx}.npz")
+        tmp = maps / f".masks_{idx}.{os.getpid()}.tmp.npz"
+        try:
+            np.savez_compressed(tmp, **result.masks)
+            os.replace(tmp, maps / f"masks_{idx}.npz")
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def write_tum(path: Path, time: np.ndarray, poses: np.ndarray) -> None:

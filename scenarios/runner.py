@@ -37,6 +37,11 @@ class RunOptions:
     updater_config: object | None = None
     localizer_config: object | None = None
     observer: SessionObserver | None = None   # told of every update session's scans
+    # The safeguard against mislocalisation (localization.confidence): scans whose pose the
+    # localiser's covariance or the scan's own fit to M_{i-1} calls unsure change nothing.
+    pose_check: bool = False
+    pose_check_config: object | None = None   # a localization.confidence.PoseCheckConfig
+    resume: bool = False       # continue the run in ``out`` after its last finished session
 
 
 class SessionObserver(Protocol):
@@ -152,6 +157,7 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     """One session i >= 2: localise, update M_{i-1} into M_i, score against G_i."""
     import sim
     from localization import MonteCarloLocalizer
+    from localization.confidence import PoseCheck
     from updater import MapUpdater
 
     name = scenario.sessions[session].name
@@ -167,6 +173,7 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     loc_prev.initialize(start, cov)
     loc_init.initialize(start, cov)
     upd = MapUpdater(previous, options.updater_config)
+    guard = PoseCheck(previous, options.pose_check_config) if options.pose_check else None
     observer = options.observer
     if observer is not None:
         observer.session_start(scenario, session, world, previous, initial, upd, loc_prev)
@@ -175,7 +182,7 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     traj = Trajectory()
     cpu = {"localizer_s": 0.0, "localizer_initial_map_s": 0.0, "updater_s": 0.0}
     counts = {"scans": 0, "scans_processed": 0, "scans_dropped_as_lost": 0,
-              "localizer_updates": 0}
+              "scans_refused_by_pose_check": 0, "localizer_updates": 0}
 
     expected = _route_length(scenario.sessions[session].route) / scenario.robot.max_speed
     with _progress(options.progress, desc=f"{name}", unit="sim-s", total=round(expected)) as bar:
@@ -190,13 +197,19 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
             loc_init.update(msg.odom_pose, msg.scan, mount)
             est_init = loc_init.estimate().pose_at(msg.odom_pose)
             t2 = time.process_time()
-            report = upd.process(msg.scan, est_prev.compose(mount), odometry=msg.odom_pose)
+            check = None
+            if guard is not None:
+                def check(scan=msg.scan, pose=est_prev, mount=mount):
+                    return guard.check(scan, pose, mount, loc_prev.estimate().cov)
+            report = upd.process(msg.scan, est_prev.compose(mount), odometry=msg.odom_pose,
+                                 pose_check=check)
             t3 = time.process_time()
             cpu["localizer_s"] += t1 - t0
             cpu["localizer_initial_map_s"] += t2 - t1
             cpu["updater_s"] += t3 - t2
             counts["scans"] += 1
             counts["scans_dropped_as_lost"] += bool(report.dropped_as_lost)
+            counts["scans_refused_by_pose_check"] += report.reason.startswith("pose unsure")
             if report.processed:
                 counts["scans_processed"] += 1
                 clean = world.scan_without_people(msg.true_pose, msg.lidar)
@@ -252,9 +265,12 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     """Play every session of a scenario, write the outputs and return the results."""
     import sim
 
+    from . import checkpoint
     from .report import write_outputs, write_session_maps
 
     options = options or RunOptions()
+    if options.resume:
+        scenario, options = checkpoint.resume_options(scenario, options)
     path = find_scenario(scenario)
     scn = sim.load_scenario(path)
     if options.quick:
@@ -268,8 +284,14 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     wall0 = time.perf_counter()
 
     results: list[SessionResult] = []
-    with _progress(options.progress, desc="sessions", total=n, unit="session") as bar:
-        for i in range(n):
+    wall_before = 0.0
+    if options.resume:
+        results, wall_before = checkpoint.finished_sessions(out_dir, scn, n)
+    else:
+        checkpoint.write_manifest(out_dir, path, seed, options)
+    with _progress(options.progress, desc="sessions", total=n, unit="session",
+                   initial=len(results)) as bar:
+        for i in range(len(results), n):
             if i == 0:
                 res = build_initial_map(scn, 0, seeds[0], options.progress)
             else:
@@ -277,12 +299,13 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
                                          seeds[i], options)
             write_session_maps(out_dir, res)
             results.append(res)
+            checkpoint.save_session(out_dir, results, wall_before + time.perf_counter() - wall0)
             bar.update(1)
 
     metrics = {
         "scenario": scn.name, "seed": seed, "quick": options.quick,
         "sessions": [r.metrics for r in results],
-        "wall_time_s": time.perf_counter() - wall0,
+        "wall_time_s": wall_before + time.perf_counter() - wall0,
     }
     run = RunResult(scn.name, seed, out_dir, results, metrics)
     write_outputs(run)

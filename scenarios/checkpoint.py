@@ -1,0 +1,203 @@
+"""What a run keeps so that a killed run can be resumed: ``mapupdate run --resume DIR``.
+
+A run's folder holds, besides its outputs, ``state/``:
+
+- ``run.json``: what defines the run (scenario file and a hash of its text, seed, sessions asked
+  for, quick routes, the pose check, the configurations), written once at the start;
+- ``session_<name>.json`` and ``session_<name>.npz``: a finished session's metrics and
+  trajectories; its maps (M_i, G_i, the oracle, the evaluation masks) are in ``maps/``;
+- ``progress.json``: the finished sessions in order. It is written last, after everything of
+  the session is on disk, so it is the commit point: a session not listed there is run again.
+
+Every file is written to a temporary name and renamed, so a run killed at any instant leaves
+each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
+seeds, which are derived per session from the scenario's seed): maps are saved as trinary
+images, which load back cell for cell, so a resumed run ends with the same maps as a run that
+was never interrupted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = 1
+
+
+class ResumeError(ValueError):
+    """A run folder that cannot be resumed, or options that contradict it; names the file."""
+
+
+def state_dir(out_dir) -> Path:
+    return Path(out_dir) / "state"
+
+
+def _write_json(path: Path, data: dict) -> None:
+    from .report import atomic_write_text
+
+    atomic_write_text(path, json.dumps(data, indent=1, default=_plain) + "\n")
+
+
+def _plain(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"cannot write {type(o).__name__} to JSON")
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ResumeError(f"{path}: missing") from None
+    except (OSError, ValueError) as e:
+        raise ResumeError(f"{path}: unreadable ({e})") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ResumeError(f"{path}: not a run state file of format {FORMAT}")
+    return data
+
+
+def _config_dict(config) -> dict | None:
+    return None if config is None else dataclasses.asdict(config)
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+# --- the manifest ----------------------------------------------------------------------------
+def write_manifest(out_dir, scenario_path: Path, seed: int, options) -> None:
+    """Start a fresh run in ``out_dir``: record what defines it, forget any earlier progress."""
+    folder = state_dir(out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "progress.json").unlink(missing_ok=True)
+    _write_json(folder / "run.json", {
+        "format": FORMAT,
+        "scenario_file": str(Path(scenario_path).resolve()),
+        "scenario_sha256": _sha256(scenario_path),
+        "seed": seed,
+        "sessions": options.sessions,
+        "quick": bool(options.quick),
+        "pose_check": bool(options.pose_check),
+        "updater_config": _config_dict(options.updater_config),
+        "localizer_config": _config_dict(options.localizer_config),
+        "pose_check_config": _config_dict(options.pose_check_config),
+    })
+
+
+def resume_options(scenario, options):
+    """(scenario path, options) of the run recorded in ``options.out``. The recording wins;
+    an option or scenario given that contradicts it is refused, since the resumed run would
+    then not be the same run. ``sessions`` may be given (a run can be continued further);
+    without it the run goes as far as it was asked to."""
+    from localization import LocalizerConfig
+    from localization.confidence import PoseCheckConfig
+    from updater import UpdaterConfig
+
+    from .catalog import find_scenario
+    from .runner import RunOptions
+
+    if options.out is None:
+        raise ResumeError("resuming needs the folder of the run to resume")
+    path = state_dir(options.out) / "run.json"
+    if not path.exists():
+        raise ResumeError(f"{options.out}: no run to resume here (no {path.name} in "
+                          f"{path.parent})")
+    m = _read_json(path)
+    scenario_file = Path(m["scenario_file"])
+    if scenario is not None and find_scenario(scenario).resolve() != scenario_file:
+        raise ResumeError(f"{path}: the run played {scenario_file}, not {scenario}")
+    if not scenario_file.exists() or _sha256(scenario_file) != m["scenario_sha256"]:
+        raise ResumeError(f"{path}: the scenario file {scenario_file} changed or vanished since "
+                          "the run started; start a new run")
+    default = RunOptions()
+    recorded = {"seed": m["seed"], "quick": m["quick"], "pose_check": m["pose_check"]}
+    for key, value in recorded.items():
+        given = getattr(options, key)
+        if given is not None and given != getattr(default, key) and given != value:
+            raise ResumeError(f"{path}: the run has {key} = {value}, not {given}")
+    configs = {"updater_config": UpdaterConfig, "localizer_config": LocalizerConfig,
+               "pose_check_config": PoseCheckConfig}
+    rebuilt = {}
+    for key, cls in configs.items():
+        given = getattr(options, key)
+        if given is not None and _config_dict(given) != m[key]:
+            raise ResumeError(f"{path}: {key} differs from the one the run started with")
+        rebuilt[key] = given if given is not None or m[key] is None else \
+            _from_dict(cls, m[key], path)
+    sessions = m["sessions"] if options.sessions is None else options.sessions
+    return scenario_file, dataclasses.replace(options, **recorded, **rebuilt, sessions=sessions)
+
+
+def _from_dict(cls, values: dict, path: Path):
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as e:
+        raise ResumeError(f"{path}: {cls.__name__}: {e}") from None
+
+
+# --- sessions ----------------------------------------------------------------------------------
+def save_session(out_dir, results: list, wall_time_s: float) -> None:
+    """After the last of ``results`` has its maps on disk: its metrics and trajectories, then
+    the progress file naming every finished session (the commit point)."""
+    folder = state_dir(out_dir)
+    res = results[-1]
+    _write_json(folder / f"session_{res.name}.json", {"format": FORMAT, "metrics": res.metrics})
+    if res.trajectory is not None:
+        tmp = folder / f".session_{res.name}.tmp.npz"
+        np.savez(tmp, **res.trajectory.arrays())
+        os.replace(tmp, folder / f"session_{res.name}.npz")
+    _write_json(folder / "progress.json", {"format": FORMAT,
+                                           "finished": [r.name for r in results],
+                                           "wall_time_s": wall_time_s})
+
+
+def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
+    """The results of the sessions a run in ``out_dir`` finished (at most ``n``), rebuilt from
+    disk, and the wall time they took."""
+    from gridmap import load_map
+
+    from .runner import SessionResult, Trajectory
+
+    path = state_dir(out_dir) / "progress.json"
+    if not path.exists():
+        return [], 0.0
+    progress = _read_json(path)
+    names = [s.name for s in scenario.sessions]
+    done = progress["finished"][:n]
+    if done != names[:len(done)]:
+        raise ResumeError(f"{path}: finished sessions {done} are not the scenario's first "
+                          f"sessions {names[:len(done)]}")
+    maps = Path(out_dir) / "maps"
+    results = []
+    for name in done:
+        metrics = _read_json(state_dir(out_dir) / f"session_{name}.json")["metrics"]
+        res = SessionResult(name, load_map(maps / f"M_{name}.yaml"),
+                            load_map(maps / f"G_{name}.yaml"), metrics=metrics)
+        if results:
+            res.previous = results[-1].updated
+            res.oracle = load_map(maps / f"oracle_{name}.yaml")
+            res.trajectory = _trajectory(state_dir(out_dir) / f"session_{name}.npz",
+                                         Trajectory)
+            with np.load(maps / f"masks_{name}.npz") as z:
+                res.masks = {k: z[k] for k in z.files}
+        results.append(res)
+    return results, float(progress.get("wall_time_s", 0.0))
+
+
+def _trajectory(path: Path, cls):
+    with np.load(path) as z:
+        traj = cls()
+        traj.time = list(z["time"])
+        traj.true = list(z["true"])
+        traj.previous_map = list(z["previous_map"])
+        traj.initial_map = list(z["initial_map"])
+    return traj

@@ -13,6 +13,7 @@ import datetime as _dt
 import resource
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Protocol
 
@@ -197,10 +198,9 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
             loc_init.update(msg.odom_pose, msg.scan, mount)
             est_init = loc_init.estimate().pose_at(msg.odom_pose)
             t2 = time.process_time()
-            check = None
-            if guard is not None:
-                def check(scan=msg.scan, pose=est_prev, mount=mount):
-                    return guard.check(scan, pose, mount, loc_prev.estimate().cov)
+            # asked by the updater only for scans that pass its gate
+            check = None if guard is None else partial(guard.check, msg.scan, est_prev, mount,
+                                                       loc_prev.estimate().cov)
             report = upd.process(msg.scan, est_prev.compose(mount), odometry=msg.odom_pose,
                                  pose_check=check)
             t3 = time.process_time()

@@ -262,7 +262,7 @@ def test_replay_with_every_pose_off_the_map_skips_and_keeps_the_map(tmp_path):
     assert (load_map(tmp_path / "out.yaml").data == ref.data).all()
 
 
-# --- time going backwards or repeating --------------------------------------------------------------
+# --- time going backwards or repeating ------------------------------------------------------
 def test_updater_gates_a_repeated_or_earlier_scan_and_it_changes_nothing():
     walls, ref = room()
     box = world.Rect(7.0125, 5.0125, 7.6125, 5.8125)

@@ -100,6 +100,7 @@ def record(session: str = "W2", quick: bool = False, route_length: float | None 
     ``quick`` cuts the update route after ``route_length`` m (default 30 m)."""
     import sim
     from scenarios import runner
+    from scenarios.session import session_seeds
     from sim.geometry import obstacle_arrays
     from sim.groundtruth import covered_cells
     from scenarios.catalog import find_scenario
@@ -107,7 +108,7 @@ def record(session: str = "W2", quick: bool = False, route_length: float | None 
     scn = sim.load_scenario(find_scenario(None))
     if quick:
         scn = sim.quick_variant(scn, max_route_length=route_length or 30.0)
-    seeds = runner._session_seeds(scn.seed, len(scn.sessions))
+    seeds = session_seeds(scn.seed, len(scn.sessions))
     m1 = runner.build_initial_map(scn, 0, seeds[0]).updated
     i = scn.session_index(session)
     world = sim.World(scn, i, seeds[i]["world"])

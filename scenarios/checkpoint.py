@@ -165,7 +165,7 @@ def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     disk, and the wall time they took."""
     from gridmap import load_map
 
-    from .runner import SessionResult, Trajectory
+    from .session import SessionResult, Trajectory
 
     path = state_dir(out_dir) / "progress.json"
     if not path.exists():

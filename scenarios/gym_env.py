@@ -13,8 +13,8 @@ from gymnasium import spaces
 
 from gridmap import OccupancyGrid, Pose2D
 
-from .episode import (StepOutcome, UpdateSession, default_reward, initial_map,
-                      waypoints_reached)
+from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
+from .session import UpdateSession, session_seeds
 
 ENV_ID = "WarehouseMapUpdate-v0"
 PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE = 0, 205, 254   # map_server's trinary image values
@@ -186,8 +186,6 @@ class WarehouseMapUpdateEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         import sim
 
-        from .runner import _session_seeds
-
         super().reset(seed=seed)
         if options:
             raise ValueError(f"reset() takes no options, got {sorted(options)}")
@@ -198,10 +196,11 @@ class WarehouseMapUpdateEnv(gym.Env):
             reference = initial_map(scn, episode_seed if self._map_seed is None
                                     else int(self._map_seed))
         initial = self._initial if self._initial is not None else reference
-        seeds = _session_seeds(episode_seed, len(scn.sessions))
+        seeds = session_seeds(episode_seed, len(scn.sessions))
         self.world = sim.World(scn, i, seeds[i]["world"])
-        self.session = UpdateSession(scn, i, self.world, reference, initial, episode_seed,
-                                     self._updater_config, self._localizer_config)
+        self.session = UpdateSession(scn, i, self.world, reference, initial,
+                                     seeds[i]["localizer"], self._updater_config,
+                                     self._localizer_config)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
         self._next_waypoint = 0

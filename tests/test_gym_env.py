@@ -15,7 +15,8 @@ import scenarios
 import sim
 from scenarios.episode import StepOutcome, default_reward, initial_map
 from scenarios.policies import RouteFollowingPolicy, evaluate, run_episode
-from scenarios.runner import RunOptions, _session_seeds, build_initial_map, run_update_session
+from scenarios.runner import RunOptions, build_initial_map, run_update_session
+from scenarios.session import session_seeds
 from tiny_room import tiny_room
 
 ENV_ID = "WarehouseMapUpdate-v0"
@@ -186,7 +187,7 @@ def test_render_draws_a_top_view(room, m1):
 
 
 def _runner_session(scn, seed, session=1):
-    seeds = _session_seeds(seed, len(scn.sessions))
+    seeds = session_seeds(seed, len(scn.sessions))
     m1 = build_initial_map(scn, 0, seeds[0])
     return run_update_session(scn, session, m1.updated, m1.updated, seeds[session],
                               RunOptions(progress=False))

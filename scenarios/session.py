@@ -1,0 +1,247 @@
+"""One update session played scan by scan: the localiser on M_{i-1} (and one on M1 for the
+comparison), the updater on M_{i-1} fed the localiser's scan-time poses, the bookkeeping the
+scores need, and at the end the session's scores in the shape of ``metrics.json``.
+
+Whoever drives the robot feeds it scans: the runner (the robot follows its route) and the
+gymnasium environment (an agent drives) share this one implementation, so the same world and
+the same commands give the same figures.
+"""
+
+from __future__ import annotations
+
+import math
+import resource
+import time
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+
+from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
+
+from . import evaluation as ev
+
+# The robot starts each session at its dock, whose pose is known to about this precision.
+START_STD = (0.05, 0.05, 0.02)  # x [m], y [m], yaw [rad]
+
+
+def session_seeds(seed: int, n_sessions: int) -> list[dict[str, np.random.SeedSequence]]:
+    """One SeedSequence per component and session, so any session can be re-run alone."""
+    out = []
+    for seq in np.random.SeedSequence(seed).spawn(n_sessions):
+        world, localizer, _spare = seq.spawn(3)
+        out.append({"world": world, "localizer": localizer})
+    return out
+
+
+def map_metrics(a: OccupancyGrid, b: OccupancyGrid) -> dict:
+    from gridmap.metrics import compare_maps
+
+    return {k: float(v) for k, v in compare_maps(a, b).items()}
+
+
+@dataclass
+class Trajectory:
+    """Robot poses at scan times: true, estimated on M_{i-1}, estimated on M1."""
+
+    time: list = field(default_factory=list)
+    true: list = field(default_factory=list)
+    previous_map: list = field(default_factory=list)
+    initial_map: list = field(default_factory=list)
+
+    def add(self, t: float, true: Pose2D, est_prev: Pose2D, est_init: Pose2D) -> None:
+        self.time.append(t)
+        self.true.append(true.as_array())
+        self.previous_map.append(est_prev.as_array())
+        self.initial_map.append(est_init.as_array())
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"time": np.asarray(self.time, np.float64),
+                "true": np.asarray(self.true, np.float64).reshape(-1, 3),
+                "previous_map": np.asarray(self.previous_map, np.float64).reshape(-1, 3),
+                "initial_map": np.asarray(self.initial_map, np.float64).reshape(-1, 3)}
+
+
+@dataclass
+class SessionResult:
+    name: str
+    updated: OccupancyGrid                 # M_i
+    truth: OccupancyGrid                   # G_i
+    previous: OccupancyGrid | None = None  # M_{i-1}
+    oracle: OccupancyGrid | None = None
+    trajectory: Trajectory | None = None
+    metrics: dict = field(default_factory=dict)
+    masks: dict = field(default_factory=dict)  # per-cell arrays: observable, people, ...
+
+
+@dataclass
+class ChangeTally:
+    """Map changes so far, judged against the truth as ``evaluation.change_detection`` judges
+    them (one cell of slack for new obstacles)."""
+
+    correct: int = 0
+    wrong: int = 0
+
+
+class UpdateSession:
+    """The robot software of one session: a localiser on the reference map M_{i-1}, one on M1
+    (for the comparison), the updater on M_{i-1}, and the bookkeeping of the scores.
+
+    ``localizer_seed``: both localisers use it, as the evaluation asks. ``pose_check``: the
+    safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
+    """
+
+    def __init__(self, scenario, session: int, world, reference: OccupancyGrid,
+                 initial: OccupancyGrid, localizer_seed, updater_config=None,
+                 localizer_config=None, pose_check: bool = False, pose_check_config=None):
+        import sim
+        from localization import MonteCarloLocalizer
+        from localization.confidence import PoseCheck
+        from updater import MapUpdater
+
+        self.scenario, self.index, self.world = scenario, session, world
+        self.name = scenario.sessions[session].name
+        self.reference, self.initial = reference, initial
+        self.truth = world.ground_truth()
+        if not reference.same_frame(self.truth):
+            raise ValueError(f"the reference map ({reference.shape} cells at "
+                             f"{reference.resolution} m, origin {reference.origin}) is not in "
+                             f"the scenario's grid frame ({self.truth.shape} cells at "
+                             f"{self.truth.resolution} m, origin {self.truth.origin})")
+        self.frame = sim.grid_frame(scenario)
+        self.mounts = [lidar.mount for lidar in scenario.robot.lidars]
+        start, cov = world.true_pose, np.diag(np.square(START_STD))
+        self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
+        self.localizer_initial = MonteCarloLocalizer(initial, localizer_config,
+                                                     seed=localizer_seed)
+        self.localizer.initialize(start, cov)
+        self.localizer_initial.initialize(start, cov)
+        self.updater = MapUpdater(reference, updater_config)
+        self.guard = PoseCheck(reference, pose_check_config) if pose_check else None
+        self.counter = ev.ObservationCounter(self.frame)
+        self.people_mask = np.zeros(self.frame.shape, bool)
+        self.trajectory = Trajectory()
+        self.cpu = {"localizer_s": 0.0, "localizer_initial_map_s": 0.0, "updater_s": 0.0}
+        self.counts = {"scans": 0, "scans_processed": 0, "scans_dropped_as_lost": 0,
+                       "scans_refused_by_pose_check": 0, "localizer_updates": 0}
+        self.last_report = None
+        self.last_scan = None
+        self.last_estimate: Pose2D | None = None
+        self._truth_free = self.truth.data == FREE
+        self._near_truth_occupied = ev.near(self.truth.data == OCCUPIED)
+        self._map = reference
+        self._tally = ChangeTally()
+        self._stale = False       # the updater processed a scan since _map was taken
+
+    # --- per scan ---------------------------------------------------------------------------------
+    def add_scan(self, msg):
+        """One ``sim.ScanMsg``, handled while the world is at the message's time; returns the
+        updater's report."""
+        world, mount = self.world, self.mounts[msg.lidar]
+        t0 = time.process_time()
+        self.counts["localizer_updates"] += bool(self.localizer.update(msg.odom_pose, msg.scan,
+                                                                       mount))
+        est = self.localizer.estimate().pose_at(msg.odom_pose)
+        t1 = time.process_time()
+        self.localizer_initial.update(msg.odom_pose, msg.scan, mount)
+        est_init = self.localizer_initial.estimate().pose_at(msg.odom_pose)
+        t2 = time.process_time()
+        # asked by the updater only for scans that pass its gate
+        check = None if self.guard is None else partial(
+            self.guard.check, msg.scan, est, mount, self.localizer.estimate().cov)
+        report = self.updater.process(msg.scan, est.compose(mount), odometry=msg.odom_pose,
+                                      pose_check=check)
+        t3 = time.process_time()
+        self.cpu["localizer_s"] += t1 - t0
+        self.cpu["localizer_initial_map_s"] += t2 - t1
+        self.cpu["updater_s"] += t3 - t2
+        self.counts["scans"] += 1
+        self.counts["scans_dropped_as_lost"] += bool(report.dropped_as_lost)
+        self.counts["scans_refused_by_pose_check"] += report.reason.startswith("pose unsure")
+        if report.processed:
+            self.counts["scans_processed"] += 1
+            clean = world.scan_without_people(msg.true_pose, msg.lidar)
+            self.counter.add_scan(msg.true_pose.compose(mount), clean.ranges, clean.angles())
+            self._stale = self._stale or not report.dropped_as_lost
+        ev.paint_people(self.people_mask, self.frame, world.people())
+        self.trajectory.add(msg.time, msg.true_pose, est, est_init)
+        self.last_report, self.last_scan, self.last_estimate = report, msg, est
+        return report
+
+    def _refresh(self) -> None:
+        # O(map): done only when someone asks, not per scan
+        if not self._stale:
+            return
+        self._map = self.updater.updated_map()
+        changed = self._map.data != self.reference.data
+        correct = changed & (((self._map.data == FREE) & self._truth_free)
+                             | ((self._map.data == OCCUPIED) & self._near_truth_occupied))
+        n_correct = int(np.count_nonzero(correct))
+        self._tally = ChangeTally(n_correct, int(np.count_nonzero(changed)) - n_correct)
+        self._stale = False
+
+    # --- now --------------------------------------------------------------------------------------
+    @property
+    def updated_map(self) -> OccupancyGrid:
+        """M_i as it stands (do not modify)."""
+        self._refresh()
+        return self._map
+
+    @property
+    def tally(self) -> ChangeTally:
+        """Correct and wrong map changes so far."""
+        self._refresh()
+        return self._tally
+
+    def estimate(self) -> Pose2D:
+        """The localiser's pose of the robot at the latest odometry."""
+        if not self.counts["scans"]:      # no odometry recorded yet: the initial pose holds
+            return self.localizer.estimate().pose
+        return self.localizer.estimate().pose_at(self.world.odom_pose)
+
+    def localization_error(self) -> float:
+        """[m] distance between the estimated and the true position now."""
+        est, true = self.estimate(), self.world.true_pose
+        return math.hypot(est.x - true.x, est.y - true.y)
+
+    # --- at the end -------------------------------------------------------------------------------
+    def result(self) -> SessionResult:
+        """M_i, the truth, the oracle, the trajectories, the masks and the session's entry of
+        ``metrics.json``."""
+        updated = self.updater.updated_map()
+        observable = self.counter.observable()
+        oracle = ev.oracle_map(self.reference, self.truth, observable)
+        arr = self.trajectory.arrays()
+        metrics = {
+            "name": self.name,
+            "map_metrics": {
+                "previous_vs_truth": map_metrics(self.reference, self.truth),
+                "updated_vs_truth": map_metrics(updated, self.truth),
+                "oracle_vs_truth": map_metrics(oracle, self.truth),
+            },
+            "change_detection": ev.change_detection(self.reference, updated, self.truth,
+                                                    observable),
+            "ghost_cells": ev.ghost_cells(updated, self.truth, self.people_mask),
+            "localization": {
+                "initial_map": ev.ape_statistics(arr["initial_map"][:, :2], arr["true"][:, :2]),
+                "previous_map": ev.ape_statistics(arr["previous_map"][:, :2],
+                                                  arr["true"][:, :2]),
+            },
+            "resources": {
+                "updater_cpu_s": self.cpu["updater_s"],
+                "localizer_cpu_s": self.cpu["localizer_s"],
+                "localizer_initial_map_cpu_s": self.cpu["localizer_initial_map_s"],
+                "updater_state_bytes": int(self.updater.state_bytes()),
+                "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+                "simulated_s": float(arr["time"][-1]) if len(arr["time"]) else 0.0,
+                **self.counts,
+            },
+        }
+        return SessionResult(self.name, updated, self.truth, previous=self.reference,
+                             oracle=oracle, trajectory=self.trajectory, metrics=metrics,
+                             masks={"observable": observable, "people": self.people_mask,
+                                    "observations": self.counter.counts})
+
+    def scores(self) -> dict:
+        """The session's entry of ``metrics.json``."""
+        return self.result().metrics

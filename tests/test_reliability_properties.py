@@ -55,7 +55,14 @@ def test_cast_rays_ends_where_the_first_blocking_cell_begins(data, fx, fy, theta
             row, col = grid.world_to_cell(pose.x + t * math.cos(a), pose.y + t * math.sin(a))
             if grid.contains(row, col):
                 assert not blocking[row, col] or (t < 1e-6 and d == 0.0)
-        if np.isfinite(d):
+        if d == 0.0:
+            # the beam starts in a blocking cell (which the step past the end may leave), or
+            # on the border heading out of the map when unknown blocks
+            row, col = grid.world_to_cell(pose.x, pose.y)
+            on_border = min(abs(pose.x - x0), abs(pose.y - y0)) < 1e-9
+            assert (grid.contains(row, col) and blocking[row, col]) or \
+                (block_unknown and on_border)
+        elif np.isfinite(d):
             # just past the end: a blocking cell, or (block_unknown) the outside of the map
             row, col = grid.world_to_cell(pose.x + (d + 1e-6) * math.cos(a),
                                           pose.y + (d + 1e-6) * math.sin(a))

@@ -1,0 +1,53 @@
+"""A short soak (benchmarks/bench_soak.py with four sessions): random, valid rearrangements of
+objects the route sees, and memory, time and scores that stay level. Slow: run with -m slow."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import bench_soak as soak  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def short_soak():
+    scn, moved = soak.soak_scenario(4, seed=2024)
+    return scn, moved, soak.run_soak(scn, moved, progress=False)
+
+
+def test_rearrangements_are_seeded_valid_and_in_view(short_soak):
+    scn, moved, _ = short_soak
+    assert [s.name for s in scn.sessions] == ["W1", "S02", "S03", "S04", "S05"]
+    assert moved == ["clutter_d", "clutter_c1, pallet_2, pallet_jack",
+                     "bucket_2, pallet_1, trash_can", "clutter_c4, pallet_2"]
+    again, moved_again = soak.soak_scenario(4, seed=2024)
+    assert moved_again == moved and again.sessions == scn.sessions
+    for i, s in enumerate(scn.sessions[1:], start=1):
+        assert s.route == scn.sessions[1].route and len(s.changes) >= 1
+        seen_before = soak.seen_objects(scn, i - 1) if i > 1 else None
+        before = {o.id: o for o in scn.obstacles(i - 1)}
+        for ch in s.changes:
+            assert ch.kind == "move"
+            shift = np.hypot(ch.to[0] - before[ch.id].center[0], ch.to[1] - before[ch.id].center[1])
+            assert soak.MIN_SHIFT - 1e-3 <= shift <= soak.MAX_SHIFT + 1e-3
+            if seen_before is not None:
+                assert ch.id in seen_before
+
+
+def test_memory_time_and_scores_stay_level(short_soak):
+    _, _, rows = short_soak
+    assert len(rows) == 4 and all(r.scans_processed > 50 for r in rows)
+    mem = np.array([r.peak_rss_mb for r in rows])
+    assert mem.max() / mem.min() < 1.05
+    wall = np.array([r.wall_s for r in rows])
+    assert wall.max() < 2 * np.median(wall)
+    assert [round(r.precision, 3) for r in rows] == [0.834, 0.962, 0.938, 0.892]
+    assert [round(r.recall, 3) for r in rows] == [0.416, 0.700, 0.734, 0.562]
+    assert [r.targets for r in rows] == [113, 407, 467, 370]
+    assert all(r.updater_state_mb < 2.0 for r in rows)

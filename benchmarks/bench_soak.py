@@ -140,7 +140,7 @@ def soak_scenario(n_sessions: int = 50, seed: int = 2024):
 
     rng = np.random.default_rng(seed)
     data = yaml.safe_load(find_scenario(None).read_text())
-    quick = sim.quick_variant(sim.scenario_from_dict(data, "warehouse"))
+    quick = sim.quick_variant(sim.scenario_from_dict(data, "warehouse"), max_route_length=30.0)
     route = [list(p) for p in quick.sessions[1].route]
     people = [p for s in data["sessions"][1:] for p in s.get("people", [])]
     base = {k: v for k, v in data.items() if k != "sessions"}
@@ -182,7 +182,7 @@ def soak_scenario(n_sessions: int = 50, seed: int = 2024):
         sessions.append(session)
         moved_names.append(", ".join(picked) or "-")
     scn = sim.scenario_from_dict({**data, "sessions": sessions}, "soak")
-    return sim.quick_variant(scn), moved_names
+    return sim.quick_variant(scn, max_route_length=30.0), moved_names
 
 
 # --- running -----------------------------------------------------------------------------------

@@ -125,6 +125,7 @@ class SessionSpec:
     changes: tuple[Change, ...] = ()
     people: tuple[PersonSpec, ...] = ()
     max_duration: float | None = None        # [s] give up if the route is not done by then
+    quick_route: tuple[tuple[float, float], ...] | None = None   # the route of quick runs
 
 
 @dataclass(frozen=True)
@@ -369,7 +370,7 @@ def _person(r: _Reader, node, key: str) -> PersonSpec:
 
 def _session(r: _Reader, node, key: str) -> SessionSpec:
     node = r.mapping(node, key, {"name", "route"},
-                     {"mapping", "changes", "people", "max_duration"})
+                     {"mapping", "changes", "people", "max_duration", "quick_route"})
     name = r.string(node["name"], _join(key, "name"))
     dur = node.get("max_duration")
     return SessionSpec(
@@ -381,7 +382,9 @@ def _session(r: _Reader, node, key: str) -> SessionSpec:
         people=tuple(_person(r, n, f"{key}.people[{j}]")
                      for j, n in enumerate(r.items(node.get("people"), _join(key, "people")))),
         max_duration=None if dur is None else r.number(dur, _join(key, "max_duration"),
-                                                       positive=True))
+                                                       positive=True),
+        quick_route=(None if node.get("quick_route") is None
+                     else r.points(node["quick_route"], _join(key, "quick_route"))))
 
 
 def _world(r: _Reader, node, key: str) -> WorldSpec:
@@ -456,10 +459,12 @@ def load_scenario(path) -> Scenario:
     return scenario_from_dict(data, str(path))
 
 
-def quick_variant(scn: Scenario, max_route_length: float = 30.0, beam_step: int = 1) -> Scenario:
-    """A cheaper copy for smoke runs: the routes of the update sessions are cut after
-    ``max_route_length`` metres (at a waypoint) and, with ``beam_step`` > 1, every lidar keeps
-    one beam in ``beam_step`` over the same field of view. Mapping routes stay whole, since the
+def quick_variant(scn: Scenario, max_route_length: float | None = None,
+                  beam_step: int = 1) -> Scenario:
+    """A cheaper copy for smoke runs: each update session drives its ``quick_route`` when the
+    scenario gives one (chosen to keep every change in view) and no ``max_route_length`` is
+    asked for, else its route cut after ``max_route_length`` metres (default 30, at a waypoint); with ``beam_step`` > 1, every lidar keeps one
+    beam in ``beam_step`` over the same field of view. Mapping routes stay whole, since the
     initial map decides what any later session can be scored against."""
     lidars = tuple(replace(ld, beams=max(2, (ld.beams - 1) // beam_step + 1))
                    for ld in scn.robot.lidars)
@@ -469,12 +474,15 @@ def quick_variant(scn: Scenario, max_route_length: float = 30.0, beam_step: int 
         if s.mapping:
             sessions.append(s)
             continue
+        if s.quick_route is not None and max_route_length is None:
+            sessions.append(replace(s, route=s.quick_route))
+            continue
         pts, length, prev = [], 0.0, start
         for p in s.route:
             length += math.dist(prev, p)
             pts.append(p)
             prev = p
-            if length >= max_route_length:
+            if length >= (30.0 if max_route_length is None else max_route_length):
                 break
         sessions.append(replace(s, route=tuple(pts)))
     return replace(scn, robot=replace(scn.robot, lidars=lidars), sessions=tuple(sessions))

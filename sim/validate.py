@@ -46,9 +46,11 @@ def check_scenario(scn, fail: Fail) -> None:
         if s.changes:
             _check_objects(scn, objs, keys, fail, f"session {s.name!r}")
             _check_start(scn, objs, keys, fail, s.name)
-        _check_path(scn.robot.radius, _robot_path(scn, s), objs, f"{skey}.route",
-                    f"the robot (radius {scn.robot.radius} m)", fail, skip_first=True,
-                    bounds=scn.world.bounds)
+        for rkey, route in (("route", s.route), ("quick_route", s.quick_route)):
+            if route is not None:
+                _check_path(scn.robot.radius, _robot_path(scn, route), objs, f"{skey}.{rkey}",
+                            f"the robot (radius {scn.robot.radius} m)", fail, skip_first=True,
+                            bounds=scn.world.bounds)
         for p, person in enumerate(s.people):
             pkey = f"{skey}.people[{p}]"
             if person.route is not None:
@@ -116,8 +118,8 @@ def _check_start(scn, objs, keys, fail: Fail, session: str | None = None) -> Non
                                 f"object {o.id!r}{where}")
 
 
-def _robot_path(scn, session) -> list[tuple[float, float]]:
-    return [(scn.robot.start.x, scn.robot.start.y)] + list(session.route)
+def _robot_path(scn, route) -> list[tuple[float, float]]:
+    return [(scn.robot.start.x, scn.robot.start.y)] + list(route)
 
 
 def _check_path(radius, pts, objs, key, who, fail: Fail, skip_first: bool = False,

@@ -84,3 +84,35 @@ def test_full_run_meets_the_bars(tmp_path):
         assert loc["previous_map"]["rmse"] <= loc["initial_map"]["rmse"] + 0.01
     last = sessions[-1]["localization"]
     assert last["previous_map"]["rmse"] < last["initial_map"]["rmse"]
+
+
+def _footprint(frame, obstacle):
+    from sim.groundtruth import covered_cells
+
+    if obstacle.is_circle:
+        return covered_cells(frame, np.zeros((0, 5)), obstacle.circle()[None])
+    return covered_cells(frame, obstacle.box()[None], np.zeros((0, 3)))
+
+
+def test_quick_routes_keep_every_change_in_view(quick_run):
+    """Each change of each update session leaves cells that the quick route observes in at
+    least T processed scans and that the previous map gets wrong: something to update."""
+    import sim
+    from scenarios import evaluation as ev
+    from scenarios.catalog import find_scenario
+
+    scn = sim.quick_variant(sim.load_scenario(find_scenario(None)))
+    frame = sim.grid_frame(scn)
+    maps = quick_run / "maps"
+    for i, session in enumerate(scn.sessions[1:], start=1):
+        before = {o.id: o for o in scn.obstacles(i - 1)}
+        after = {o.id: o for o in scn.obstacles(i)}
+        previous = load_map(maps / f"M_{scn.sessions[i - 1].name}.yaml")
+        truth = load_map(maps / f"G_{session.name}.yaml")
+        observable = np.load(maps / f"masks_{session.name}.npz")["observable"]
+        wrong_occ, wrong_free = ev.wrong_cells(previous, truth)
+        targets = (wrong_occ | wrong_free) & observable
+        for change in session.changes:
+            places = [o for o in (before.get(change.id), after.get(change.id)) if o is not None]
+            seen = [int((ev.near(_footprint(frame, o)) & targets).sum()) for o in places]
+            assert max(seen) >= 10, (session.name, change.kind, change.id, seen)

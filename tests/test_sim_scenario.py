@@ -234,3 +234,12 @@ def test_quick_variant_cuts_update_routes_and_keeps_mapping_and_beams():
     assert thin.robot.lidars[0].beams == 271
     assert thin.robot.lidars[0].angle_increment == pytest.approx(
         4 * scn.robot.lidars[0].angle_increment)
+
+
+def test_quick_route_is_validated_and_used_by_quick_runs():
+    data = edit(lambda d: d["sessions"][1].update(quick_route=[[3.1, 3.3]]))
+    refused(data, "sessions[1].quick_route[0]", "'pallet_1'")
+    scn = load(edit(lambda d: d["sessions"][1].update(quick_route=[[5.2, 1.0], [5.2, 0.6]])))
+    assert sim.quick_variant(scn).sessions[1].route == ((5.2, 1.0), (5.2, 0.6))
+    # an explicit length cuts the full route instead
+    assert sim.quick_variant(scn, max_route_length=1.0).sessions[1].route == ((5.2, 0.6),)

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .atomic import write_atomically
 from .types import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid
 
 MODES = ("trinary", "scale", "raw")
@@ -292,22 +293,10 @@ def save_map(grid: OccupancyGrid, path) -> tuple[Path, Path]:
 
 
 def _write_atomically(path: Path, content: bytes) -> None:
-    """Write to a temporary file beside ``path``, flush it to disk and rename it into place,
-    so ``path`` is always either the old file or the new one, complete. The temporary file is
-    opened like any other (not with mkstemp's owner-only mode), so a map_server running as
-    another user can read the map."""
-    tmp = path.resolve().parent / f".{path.name}.{os.getpid()}.tmp"
     try:
-        with open(tmp, "wb") as f:
-            f.write(content)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException as e:
-        tmp.unlink(missing_ok=True)
-        if isinstance(e, OSError):
-            raise MapFileError(f"{path}: cannot write ({e})") from None
-        raise
+        write_atomically(path, content)
+    except OSError as e:
+        raise MapFileError(f"{path}: cannot write ({e})") from None
 
 
 # --- helpers -----------------------------------------------------------------------------------

@@ -38,19 +38,9 @@ def state_dir(out_dir) -> Path:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    from .report import atomic_write_text
+    from .report import atomic_write_text, json_default
 
-    atomic_write_text(path, json.dumps(data, indent=1, default=_plain) + "\n")
-
-
-def _plain(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"cannot write {type(o).__name__} to JSON")
+    atomic_write_text(path, json.dumps(data, indent=1, default=json_default) + "\n")
 
 
 def _read_json(path: Path) -> dict:

@@ -15,23 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, OccupancyGrid
+from gridmap.atomic import write_atomically
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """``path`` is always either the old file or the new one, complete: the text goes to a
-    temporary file beside it (opened normally, so it gets the usual permissions rather than
-    mkstemp's owner-only ones), flushed to disk, renamed into place."""
-    path = Path(path)
-    tmp = path.parent / f".{path.name}.{os.getpid()}.tmp"
-    try:
-        with open(tmp, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    """``path`` is always either the old file or the new one, complete."""
+    write_atomically(path, text.encode())
 
 
 def write_session_maps(out_dir: Path, result) -> None:
@@ -198,7 +187,7 @@ def write_figures(out_dir: Path, run) -> None:
         plt.close(fig)
 
 
-def _json_default(o):
+def json_default(o):
     if isinstance(o, (np.integer,)):
         return int(o)
     if isinstance(o, (np.floating,)):
@@ -220,6 +209,6 @@ def write_outputs(run) -> None:
         write_tum(traj_dir / f"{s.name}_on_previous_map.tum", tr["time"], tr["previous_map"])
         write_tum(traj_dir / f"{s.name}_on_initial_map.tum", tr["time"], tr["initial_map"])
     atomic_write_text(out_dir / "metrics.json",
-                      json.dumps(run.metrics, indent=2, default=_json_default) + "\n")
+                      json.dumps(run.metrics, indent=2, default=json_default) + "\n")
     atomic_write_text(out_dir / "report.md", render_report(run.metrics))
     write_figures(out_dir, run)

@@ -116,3 +116,20 @@ def test_quick_routes_keep_every_change_in_view(quick_run):
             places = [o for o in (before.get(change.id), after.get(change.id)) if o is not None]
             seen = [int((ev.near(_footprint(frame, o)) & targets).sum()) for o in places]
             assert max(seen) >= 10, (session.name, change.kind, change.id, seen)
+
+
+def test_render_command_draws_a_session(tmp_path):
+    out = tmp_path / "w3.png"
+    assert main(["render", "--session", "W3", "--out", str(out)]) == 0
+    from PIL import Image
+
+    img = Image.open(out)
+    assert img.size[0] > 300 and img.size[1] > 300
+
+
+def test_compare_command_prints_the_three_metrics(tmp_path, capsys, quick_run):
+    maps = quick_run / "maps"
+    assert main(["compare", str(maps / "M_W2.yaml"), str(maps / "G_W2.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "CC" in out and "MS" in out and "OPDF" in out
+    assert main(["compare", str(maps / "M_W2.yaml"), str(tmp_path / "none.yaml")]) == 2

@@ -221,3 +221,12 @@ def cast_ranges(data, sensor, angles, max_len, block_unknown, res, out):
             out[i] = t * res
         else:
             out[i] = np.inf
+
+
+@njit(cache=True)
+def find_root(parent, k):
+    """Union-find: the root of ``k`` in ``parent``, halving the path on the way."""
+    while parent[k] != k:
+        parent[k] = parent[parent[k]]
+        k = parent[k]
+    return k

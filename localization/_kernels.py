@@ -8,6 +8,8 @@ import math
 import numpy as np
 from numba import njit
 
+from gridmap._kernels import find_root
+
 # Bin keys pack (ix, iy, itheta) into one int64: ix, iy offset by KEY_OFFSET into [0, KEY_SPAN).
 KEY_OFFSET = 1 << 20
 KEY_SPAN = 1 << 21
@@ -102,14 +104,6 @@ def kld_sample_count(keys, pf_err, pf_z, min_n, max_n, table):
 
 
 @njit(cache=True)
-def _root(parent, a):
-    while parent[a] != a:
-        parent[a] = parent[parent[a]]
-        a = parent[a]
-    return a
-
-
-@njit(cache=True)
 def cluster_bins(keys, n_theta, labels):
     """Label particles by connected groups of occupied bins (26-neighbours, theta wrapping), as
     AMCL's kd-tree clustering; writes ``labels`` (N,) and returns the number of clusters."""
@@ -125,13 +119,13 @@ def cluster_bins(keys, n_theta, labels):
                     nkey = (cell + dx * KEY_SPAN + dy) * n_theta + (it + dt) % n_theta
                     j = np.searchsorted(ukeys, nkey)
                     if j < nb and ukeys[j] == nkey:
-                        ra, rb = _root(parent, b), _root(parent, j)
+                        ra, rb = find_root(parent, b), find_root(parent, j)
                         if ra != rb:
                             parent[max(ra, rb)] = min(ra, rb)
     bin_label = np.full(nb, -1)
     count = 0
     for b in range(nb):
-        r = _root(parent, b)
+        r = find_root(parent, b)
         if bin_label[r] < 0:
             bin_label[r] = count
             count += 1

@@ -10,7 +10,7 @@ packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
 import numpy as np
 from numba import njit
 
-from gridmap._kernels import NO_HIT, first_hit, traverse
+from gridmap._kernels import NO_HIT, find_root, first_hit, traverse
 
 FREE = 0
 OCC = 100
@@ -399,14 +399,6 @@ def unknown_runs(ref, out_row, out_c0, out_c1):
                 out_row[n], out_c0[n], out_c1[n] = row, c0, col - 1
             n += 1
     return n
-
-
-@njit(cache=True)
-def find_root(parent, k):
-    while parent[k] != k:
-        parent[k] = parent[parent[k]]
-        k = parent[k]
-    return k
 
 
 @njit(cache=True)

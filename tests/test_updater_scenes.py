@@ -235,3 +235,58 @@ def test_last_check_draws_no_wall_along_unknown_that_reaches_the_map_border():
     assert (out[door] == FREE).mean() > 0.5         # the door is seen open
     assert not updater.enclosed_unknown().any()
     assert ((ref.data == UNKNOWN) & (out == OCCUPIED)).sum() == 0
+
+
+def _fragmented_outline(box_cells: np.ndarray, keep: int = 3, gap: int = 6) -> np.ndarray:
+    """The outline cells of a box cut into pieces: ``keep`` cells kept, then ``gap`` left out,
+    along each row and column of the outline."""
+    inner = box_cells.copy()
+    inner[1:-1, 1:-1] &= (box_cells[:-2, 1:-1] & box_cells[2:, 1:-1] & box_cells[1:-1, :-2]
+                          & box_cells[1:-1, 2:])
+    outline = box_cells & ~inner
+    rows, cols = np.nonzero(outline)
+    kept = np.zeros_like(outline)
+    period = keep + gap
+    along = np.where(np.isin(rows, [rows.min(), rows.max()]), cols, rows)
+    kept[rows, cols] = (along % period) < keep
+    return kept
+
+
+def test_fill_gaps_completes_a_partly_mapped_face_and_leaves_the_rest_alone():
+    """M holds only pieces of a box's outline (what an earlier session left), its interior
+    free; the box is all there. Between the pieces a hit pairs with a piece within D(r), so
+    the method as written never fills the gaps; ``fill_gaps`` flags hits two or more cells from
+    anything in M (two cells each way), and the facing gaps fill. Nothing else is added, no wall
+    cell is freed."""
+    walls = world.room_walls()
+    box = world.cells_of(BOX)
+    ref = world.rasterise(walls)
+    pieces = _fragmented_outline(box)
+    ref = ref.with_data(np.where(pieces, OCCUPIED, ref.data).astype(np.int8))
+    near_pieces = world.dilate(pieces, 1)
+    results = {}
+    for fill in (False, True):
+        each, worst = wall_watch(ref.data == OCCUPIED)
+        updater, hits, _ = drive(ref, walls + [BOX], UpdaterConfig(fill_gaps=fill), each=each)
+        out = updater.updated_map().data
+        gaps = box & (hits >= T) & ~near_pieces        # facing cells two or more from a piece
+        new = (ref.data == FREE) & (out == OCCUPIED)
+        results[fill] = (float((world.dilate(out == OCCUPIED, 1) & gaps).sum() / gaps.sum()),
+                         int(new[~world.dilate(box, 1)].sum()), worst[0], int(gaps.sum()))
+    assert results[True][3] >= 25
+    assert results[False][0] < 0.1 and results[True][0] >= 0.7     # measured: 0 and 0.79
+    assert results[True][1] == 0 and results[True][2] == 0
+
+
+def test_fill_gaps_draws_nothing_beside_walls_from_noisy_poses():
+    """A room that did not change, poses with 2 cm and 1 deg of noise: with ``fill_gaps`` no
+    cell more than one cell from a wall becomes occupied and no wall cell is freed."""
+    walls = world.room_walls()
+    ref = world.rasterise(walls + [BOX])
+    each, worst = wall_watch(ref.data == OCCUPIED)
+    for seed in (0, 1):
+        updater, _, _ = drive(ref, walls + [BOX], UpdaterConfig(fill_gaps=True), each=each,
+                              seed=seed, lidar="270 off-centre")
+        out = updater.updated_map().data
+        assert ((out == OCCUPIED) & ~world.dilate(ref.data == OCCUPIED, 1)).sum() == 0
+    assert worst[0] == 0

@@ -177,3 +177,16 @@ def test_rasterise_outline_and_interior():
     inside = grid.data[m]
     assert (inside == UNKNOWN).sum() == 19 * 11 and (inside == OCCUPIED).sum() == 21 * 13 - 209
     assert grid.data[0, 0] == UNKNOWN and grid.data[110, 110] == FREE
+
+
+def dilate(mask: np.ndarray, cells: int) -> np.ndarray:
+    """``mask`` grown by ``cells`` in every direction (8-neighbour steps)."""
+    out = mask.copy()
+    for _ in range(cells):
+        grown = out.copy()
+        grown[1:, :] |= out[:-1, :]
+        grown[:-1, :] |= out[1:, :]
+        grown[:, 1:] |= grown[:, :-1].copy()
+        grown[:, :-1] |= grown[:, 1:].copy()
+        out = grown
+    return out

@@ -243,6 +243,32 @@ def flag_changed(ref, hx, hy, r, verdict, sensor, tpar, res, marks, rows, cols, 
     return n, n_new
 
 
+@njit(cache=True)
+def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
+    """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
+    whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has
+    nothing that near). Returns (new count, cells flagged here)."""
+    height, width = ref.shape
+    n0 = n
+    k = clearance
+    for i in range(hx.shape[0]):
+        if verdict[i] != UNCHANGED:
+            continue
+        row0 = int(np.floor(hy[i]))
+        col0 = int(np.floor(hx[i]))
+        if row0 < k or row0 >= height - k or col0 < k or col0 >= width - k:
+            continue
+        free = True
+        for dr in range(-k, k + 1):
+            for dc in range(-k, k + 1):
+                if ref[row0 + dr, col0 + dc] != FREE:
+                    free = False
+        if free and test_and_set(marks, row0 * width + col0):
+            out[n] = row0 * width + col0
+            n += 1
+    return n, n - n0
+
+
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
 @njit(cache=True)
 def flag_unchanged(ref, hx, hy, verdict, sensor, free_fraction, marks, rows, cols, out):

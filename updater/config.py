@@ -50,6 +50,11 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
+    # Not in the paper: a hit that pairs with M but lands in a cell with nothing of M within
+    # fill_gaps_clearance also gets a changed flag. The pairing distance D(r) otherwise hides
+    # the gaps of a face that an earlier session mapped only in pieces (README, "fill_gaps").
+    fill_gaps: bool = False
+    fill_gaps_clearance: float = 0.10        # [m] free square around the hit cell, each way
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -62,7 +67,7 @@ class UpdaterConfig:
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
 
     def __post_init__(self):
-        for name in ("gating", "neighbour_support", "last_check"):
+        for name in ("gating", "neighbour_support", "last_check", "fill_gaps"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")
@@ -70,7 +75,7 @@ class UpdaterConfig:
                      "gate_recovery_time", "gate_recovery_distance", "gate_velocity_window",
                      "window_deg", "pairing_distance_slope", "radius_near", "radius_far",
                      "removed_skip_fraction", "removed_skip_min", "last_check_max_area",
-                     "cast_margin", "pairing_range_near"):
+                     "cast_margin", "pairing_range_near", "fill_gaps_clearance"):
             _check_number(name, getattr(self, name), lambda v: v >= 0, "a number >= 0")
         for name in ("gate_fast_turn_deg_s", "max_range", "pairing_distance_near",
                      "pairing_distance_max", "radius_far_range"):

@@ -140,6 +140,11 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
                      cfg.removed_skip_fraction, cfg.removed_skip_min])
     n, n_new = kernels().flag_changed(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
                                       sensor, tpar, res, marks, ws.rows, ws.cols, ws.changed)
+    if cfg.fill_gaps:
+        clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
+        n, n_gap = kernels().flag_gaps(ref, beams.hx, beams.hy, beams.verdict, clearance,
+                                       marks, ws.changed, n)
+        n_new += n_gap
     return n, n_new
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import time as _time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
 FORMATS = ("carmen", "ros1", "ros2")
 # Where the robot starts when the localiser has only a rough idea: std of x, y [m], yaw [rad].
 INITIAL_STD = (0.25, 0.25, 0.1)
+NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -222,12 +224,15 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                     odom_topic=None, pose_topic=None, truth_topic=None,
                     laser_mount: Pose2D | None = None, initial_pose: Pose2D | None = None,
                     initial_std=INITIAL_STD, start_time: float | None = None,
-                    end_time: float | None = None, seed: int = 0) -> dict:
+                    end_time: float | None = None, seed: int = 0,
+                    pose_check: bool = False, pose_check_config=None) -> dict:
     """Update the map at ``map_path`` with the scans of ``log_path``; write ``out_path``.
 
     With ``state_path``, the updater's state is loaded from it when the file exists (so this
     recording continues the last one) and saved to it at the end. ``start_time`` /
-    ``end_time`` [s, log time] limit the scans used. Returns a summary (counts, the pose source
+    ``end_time`` [s, log time] limit the scans used. ``pose_check``: scans whose pose the
+    scan's own fit to the reference map (and, with the localiser, its covariance) calls unsure
+    change nothing (``localization.confidence.PoseCheck``). Returns a summary (counts, the pose source
     used, what was skipped, cells changed, wall time).
     """
     from gridmap import load_map, save_map
@@ -259,7 +264,13 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
 
     updater, state_loaded = _updater(grid, updater_config, state_path)
     counts = {"scans": 0, "scans_used": 0, "scans_without_pose": 0, "scans_processed": 0,
-              "scans_dropped_as_lost": 0, "localizer_updates": 0}
+              "scans_dropped_as_lost": 0, "scans_refused_by_pose_check": 0,
+              "localizer_updates": 0}
+    guard = None
+    if pose_check:
+        from localization.confidence import PoseCheck
+
+        guard = PoseCheck(updater.reference_map, pose_check_config)
     localizer = None
     from tqdm import tqdm
 
@@ -279,8 +290,14 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                 counts["scans_without_pose"] += 1
                 continue
             counts["scans_used"] += 1
-            report = updater.process(obs.scan, sensor, odometry=obs.odom)
+            check = None
+            if guard is not None:
+                cov = localizer.estimate().cov if source == "localizer" else None
+                # the sensor pose with no mount: the check scores the laser where it is
+                check = partial(guard.check, obs.scan, sensor, NO_MOUNT, cov)
+            report = updater.process(obs.scan, sensor, odometry=obs.odom, pose_check=check)
             counts["scans_processed"] += bool(report.processed)
+            counts["scans_refused_by_pose_check"] += report.reason.startswith("pose unsure")
             counts["scans_dropped_as_lost"] += bool(report.dropped_as_lost)
     if counts["scans_used"] == 0:
         raise LogError(f"{log_path}: no scan could be placed ({counts['scans']} read, "

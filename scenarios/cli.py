@@ -82,9 +82,11 @@ def _cmd_update(args) -> int:
                               pose_source=args.poses, updater_config=args.config,
                               progress=not args.no_progress, log_format=args.format,
                               scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
-                              pose_topic=args.pose_topic)
+                              pose_topic=args.pose_topic, pose_check=args.pose_check)
     print(f"wrote {args.out}: {summary['scans_processed']} of {summary['scans']} scans processed, "
-          f"{summary['scans_dropped_as_lost']} dropped as lost, {summary['cells_freed']} cells "
+          f"{summary['scans_dropped_as_lost']} dropped as lost, "
+          f"{summary['scans_refused_by_pose_check']} refused by the pose check, "
+          f"{summary['cells_freed']} cells "
           f"freed, {summary['cells_occupied']} occupied (poses: {summary['pose_source']})")
     return 0
 
@@ -115,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="continue the killed run in DIR after its last finished session")
     run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map or the localiser's "
-                          "covariance calls unsure (default: off)")
+                          "covariance calls unsure (default: on)")
     run.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",
@@ -143,6 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     upd.add_argument("--odom-topic", default=None)
     upd.add_argument("--pose-topic", default=None)
     upd.add_argument("--no-progress", action="store_true", help="no progress bar")
+    upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
+                     help="skip scans whose pose the scan's fit to the map (or the localiser's "
+                          "covariance) calls unsure (default: off; see docs/real_data.md)")
     upd.set_defaults(func=_cmd_update)
 
     ren = sub.add_parser("render", help="draw a session's world to a PNG")

@@ -101,7 +101,7 @@ class WarehouseMapUpdateEnv(gym.Env):
     * ``map_observation``: add the map image to the observation.
     * ``reward_fn``: see Rewards. ``lost_distance`` [m] (0.5).
     * ``waypoint_tolerance`` [m] (0.3), ``goal_tolerance`` [m] (0.05): see Episode End.
-    * ``updater_config``, ``localizer_config``: as for the runner.
+    * ``updater_config``, ``localizer_config``, ``pose_check`` (on): as for the runner.
     * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
 
     ## Version History
@@ -124,8 +124,8 @@ class WarehouseMapUpdateEnv(gym.Env):
                  map_seed: int | None = None, control_period: float | None = None,
                  map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
                  waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
-                 updater_config=None, localizer_config=None, render_mode: str | None = None,
-                 render_scale: int = 2):
+                 updater_config=None, localizer_config=None, pose_check: bool = True,
+                 render_mode: str | None = None, render_scale: int = 2):
         import sim
 
         self.scenario = _load_scenario(scenario, quick)
@@ -154,6 +154,7 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.waypoint_tolerance, self.goal_tolerance = float(waypoint_tolerance), \
             float(goal_tolerance)
         self._updater_config, self._localizer_config = updater_config, localizer_config
+        self._pose_check = bool(pose_check)
         self._route = np.asarray(self.scenario.sessions[self.session_index].route, np.float64)
         self.action_space, self.observation_space = self._spaces()
         self.world = None
@@ -200,7 +201,7 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.world = sim.World(scn, i, seeds[i]["world"])
         self.session = UpdateSession(scn, i, self.world, reference, initial,
                                      seeds[i]["localizer"], self._updater_config,
-                                     self._localizer_config)
+                                     self._localizer_config, pose_check=self._pose_check)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
         self._next_waypoint = 0

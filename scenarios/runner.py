@@ -34,7 +34,7 @@ class RunOptions:
     observer: SessionObserver | None = None   # told of every update session's scans
     # The safeguard against mislocalisation (localization.confidence): scans whose pose the
     # localiser's covariance or the scan's own fit to M_{i-1} calls unsure change nothing.
-    pose_check: bool = False
+    pose_check: bool = True
     pose_check_config: object | None = None   # a localization.confidence.PoseCheckConfig
     resume: bool = False       # continue the run in ``out`` after its last finished session
 

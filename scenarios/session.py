@@ -93,7 +93,7 @@ class UpdateSession:
 
     def __init__(self, scenario, session: int, world, reference: OccupancyGrid,
                  initial: OccupancyGrid, localizer_seed, updater_config=None,
-                 localizer_config=None, pose_check: bool = False, pose_check_config=None):
+                 localizer_config=None, pose_check: bool = True, pose_check_config=None):
         import sim
         from localization import MonteCarloLocalizer
         from localization.confidence import PoseCheck

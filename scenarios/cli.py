@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     upd.add_argument("--no-progress", action="store_true", help="no progress bar")
     upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
-                          "covariance) calls unsure (default: off; see docs/real_data.md)")
+                          "covariance) calls unsure (default: off; README, 'Choices')")
     upd.set_defaults(func=_cmd_update)
 
     ren = sub.add_parser("render", help="draw a session's world to a PNG")

@@ -263,6 +263,9 @@ def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
             for dc in range(-k, k + 1):
                 if ref[row0 + dr, col0 + dc] != FREE:
                     free = False
+                    break
+            if not free:
+                break
         if free and test_and_set(marks, row0 * width + col0):
             out[n] = row0 * width + col0
             n += 1

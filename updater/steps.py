@@ -135,7 +135,9 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
                        cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> tuple[int, int]:
     """Changed flags of the detected-change beams into ``ws.changed`` (each cell once):
     new obstacles (hit cell, if M is free within tol(r)) and removed obstacles (occupied or
-    unknown cells up to p_th, all but the last). Returns (cells flagged, new-obstacle flags)."""
+    unknown cells up to p_th, all but the last). With ``cfg.fill_gaps`` also the hit cells of
+    agreeing beams with nothing of M within ``fill_gaps_clearance`` (counted as new-obstacle
+    flags). Returns (cells flagged, new-obstacle flags)."""
     tpar = np.array([cfg.radius_near, cfg.radius_far, cfg.radius_far_range,
                      cfg.removed_skip_fraction, cfg.removed_skip_min])
     n, n_new = kernels().flag_changed(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,

@@ -232,8 +232,8 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
     recording continues the last one) and saved to it at the end. ``start_time`` /
     ``end_time`` [s, log time] limit the scans used. ``pose_check``: scans whose pose the
     scan's own fit to the reference map (and, with the localiser, its covariance) calls unsure
-    change nothing (``localization.confidence.PoseCheck``). Returns a summary (counts, the pose source
-    used, what was skipped, cells changed, wall time).
+    change nothing (``localization.confidence.PoseCheck``). Returns a summary (counts, the pose
+    source used, what was skipped, cells changed, wall time).
     """
     from gridmap import load_map, save_map
 

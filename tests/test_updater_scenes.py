@@ -290,3 +290,31 @@ def test_fill_gaps_draws_nothing_beside_walls_from_noisy_poses():
         out = updater.updated_map().data
         assert ((out == OCCUPIED) & ~world.dilate(ref.data == OCCUPIED, 1)).sum() == 0
     assert worst[0] == 0
+
+
+def test_a_sub_cell_pose_error_leaves_kept_objects_whole_and_still_frees_a_removed_one():
+    # Three kept boxes around the removed one: rays through the removed box's place graze
+    # their corners. 4 cm of persistent error (under a cell) moves those rays into the kept
+    # boxes' outline cells; the hits on the kept boxes in the same scans say they are there.
+    kept = [Rect(6.3125, 5.1125, 6.9125, 5.5125), Rect(4.3125, 6.0125, 4.8125, 6.6125),
+            Rect(5.3125, 4.3125, 5.9125, 4.9125)]
+    walls = world.room_walls()
+    ref = world.rasterise(walls + kept, hollow=[BOX])
+    box = world.cells_of(BOX)
+    kept_cells = np.zeros(ref.shape, bool)
+    for k in kept:
+        kept_cells |= world.cells_of(k)
+    kept_cells &= ref.data == OCCUPIED
+    freed = {}
+    for radius in (0.0, UpdaterConfig().seen_surface_radius):
+        freed[radius] = 0
+        for dx, dy in ((0.04, 0.0), (0.0, -0.04)):
+            updater, _, seen = drive(ref, walls + kept, UpdaterConfig(seen_surface_radius=radius),
+                                     offset=lambda p: Pose2D(p.x + dx, p.y + dy, p.theta))
+            out = updater.updated_map().data
+            outline = box & (ref.data == OCCUPIED) & (seen >= T)
+            assert (out[outline] == FREE).all() and (out[box] == FREE).all()
+            assert not (out[(ref.data == OCCUPIED) & ~box & ~kept_cells] == FREE).any()
+            freed[radius] += int((out[kept_cells] == FREE).sum())
+    assert freed[0.0] > 40                 # without the guard: corners of kept boxes freed
+    assert freed[UpdaterConfig().seen_surface_radius] <= 6

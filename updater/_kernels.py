@@ -244,6 +244,43 @@ def flag_changed(ref, hx, hy, r, verdict, sensor, tpar, res, marks, rows, cols, 
 
 
 @njit(cache=True)
+def protect_seen(ref, hx, hy, verdict, radius, marks, out):
+    """Mark (in ``marks``, so the removed-obstacle walk passes them by) the occupied cells of
+    ``ref`` that come within ``radius`` (grid units) of the hit point of any valid beam, and
+    list them in ``out``. Unknown cells are left to the walk: they hold no surface a hit could
+    confirm (an object's interior), and the last check closes what stays unknown next to a
+    freed cell. Returns the count listed."""
+    height, width = ref.shape
+    n = 0
+    r2 = radius * radius
+    for i in range(hx.shape[0]):
+        if verdict[i] == INVALID:
+            continue
+        x, y = hx[i], hy[i]
+        for row in range(max(int(np.floor(y - radius)), 0),
+                         min(int(np.floor(y + radius)) + 1, height)):
+            dy = max(row - y, 0.0, y - row - 1.0)
+            for col in range(max(int(np.floor(x - radius)), 0),
+                             min(int(np.floor(x + radius)) + 1, width)):
+                dx = max(col - x, 0.0, x - col - 1.0)
+                if dx * dx + dy * dy > r2:
+                    continue
+                if ref[row, col] != OCC:
+                    continue
+                idx = row * width + col
+                if test_and_set(marks, idx):
+                    out[n] = idx
+                    n += 1
+    return n
+
+
+@njit(cache=True)
+def clear_marks(marks, cells, n):
+    for k in range(n):
+        marks[cells[k] >> 3] = 0
+
+
+@njit(cache=True)
 def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
     """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
     whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has

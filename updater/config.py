@@ -50,6 +50,12 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
+    # Not in the paper: an occupied cell of M within this distance of the hit point of any
+    # valid beam of the scan (a surface the scan sees) gets no removed-obstacle flag from that
+    # scan. Under a pose error below a cell the rays that graze an object's corner cross its
+    # outline cells while the beams that hit the object say it is still there (README,
+    # "Choices").
+    seen_surface_radius: float = 0.075       # [m]; 0: off
     # Not in the paper: a hit that pairs with M but lands in a cell with nothing of M within
     # fill_gaps_clearance also gets a changed flag. The pairing distance D(r) otherwise hides
     # the gaps of a face that an earlier session mapped only in pieces (README, "fill_gaps").
@@ -75,7 +81,8 @@ class UpdaterConfig:
                      "gate_recovery_time", "gate_recovery_distance", "gate_velocity_window",
                      "window_deg", "pairing_distance_slope", "radius_near", "radius_far",
                      "removed_skip_fraction", "removed_skip_min", "last_check_max_area",
-                     "cast_margin", "pairing_range_near", "fill_gaps_clearance"):
+                     "cast_margin", "pairing_range_near", "fill_gaps_clearance",
+                     "seen_surface_radius"):
             _check_number(name, getattr(self, name), lambda v: v >= 0, "a number >= 0")
         for name in ("gate_fast_turn_deg_s", "max_range", "pairing_distance_near",
                      "pairing_distance_max", "radius_far_range"):

@@ -51,6 +51,7 @@ class Workspace:
         self._walk = -1
         self._flags = -1
         self._moved = -1
+        self._protected = -1
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:
@@ -83,6 +84,11 @@ class Workspace:
         if capacity > self._moved:
             self._moved = int(capacity * 1.25) + 64
             self.moved = np.zeros(self._moved, np.int32)
+
+    def for_protected(self, capacity: int) -> None:
+        if capacity > self._protected:
+            self._protected = int(capacity * 1.25) + 64
+            self.protected = np.zeros(self._protected, np.int32)
 
     def nbytes(self) -> int:
         return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
@@ -135,11 +141,19 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
                        cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> tuple[int, int]:
     """Changed flags of the detected-change beams into ``ws.changed`` (each cell once):
     new obstacles (hit cell, if M is free within tol(r)) and removed obstacles (occupied or
-    unknown cells up to p_th, all but the last). With ``cfg.fill_gaps`` also the hit cells of
+    unknown cells up to p_th, all but the last, but no occupied cell within
+    ``seen_surface_radius`` of any hit of the scan). With ``cfg.fill_gaps`` also the hit cells of
     agreeing beams with nothing of M within ``fill_gaps_clearance`` (counted as new-obstacle
     flags). Returns (cells flagged, new-obstacle flags)."""
     tpar = np.array([cfg.radius_near, cfg.radius_far, cfg.radius_far_range,
                      cfg.removed_skip_fraction, cfg.removed_skip_min])
+    n_protected = 0
+    radius = cfg.seen_surface_radius / res
+    if radius > 0 and beams.changes:
+        side = 2 * int(math.ceil(radius)) + 1
+        ws.for_protected(min(beams.hx.shape[0] * side * side, ref.size))
+        n_protected = kernels().protect_seen(ref, beams.hx, beams.hy, beams.verdict, radius,
+                                             marks, ws.protected)
     n, n_new = kernels().flag_changed(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
                                       sensor, tpar, res, marks, ws.rows, ws.cols, ws.changed)
     if cfg.fill_gaps:
@@ -147,6 +161,8 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
         n, n_gap = kernels().flag_gaps(ref, beams.hx, beams.hy, beams.verdict, clearance,
                                        marks, ws.changed, n)
         n_new += n_gap
+    if n_protected:
+        kernels().clear_marks(marks, ws.protected, n_protected)
     return n, n_new
 
 

@@ -244,11 +244,12 @@ def flag_changed(ref, hx, hy, r, verdict, sensor, tpar, res, marks, rows, cols, 
 
 
 @njit(cache=True)
-def protect_seen(ref, hx, hy, verdict, radius, marks, out):
-    """Mark (in ``marks``, so the removed-obstacle walk passes them by) the occupied cells of
-    ``ref`` that come within ``radius`` (grid units) of the hit point of any valid beam, and
-    list them in ``out``. Unknown cells are left to the walk: they hold no surface a hit could
-    confirm (an object's interior), and the last check closes what stays unknown next to a
+def protect_seen(ref, enclosed, hx, hy, verdict, radius, marks, out):
+    """Mark (in ``marks``, so the removed-obstacle walk passes them by) the cells of ``ref``
+    that come within ``radius`` (grid units) of the hit point of any valid beam and are
+    occupied, or unknown outside the ``enclosed`` regions, and list them in ``out``. Enclosed
+    unknown cells (an object's interior) are left to the walk: a hit near one is on the face
+    of whatever still stands beside it, and the last check closes what stays unknown next to a
     freed cell. Returns the count listed."""
     height, width = ref.shape
     n = 0
@@ -265,9 +266,10 @@ def protect_seen(ref, hx, hy, verdict, radius, marks, out):
                 dx = max(col - x, 0.0, x - col - 1.0)
                 if dx * dx + dy * dy > r2:
                     continue
-                if ref[row, col] != OCC:
-                    continue
+                v = ref[row, col]
                 idx = row * width + col
+                if v == FREE or (v != OCC and bit_get(enclosed, idx)):
+                    continue
                 if test_and_set(marks, idx):
                     out[n] = idx
                     n += 1

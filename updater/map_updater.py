@@ -148,7 +148,7 @@ class MapUpdater:
             return ScanReport(t, True, changed_cells=self._n_changed, dropped_as_lost=True,
                               **report)
         n_ch, n_new = steps.flag_changed_cells(self._ref, beams, sensor, self._res, cfg,
-                                               self._ch_marks, self._ws)
+                                               self._ch_marks, self._enclosed, self._ws)
         n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, cfg, self._un_marks,
                                           self._ws)
         hist, ref = self._hist.reshape(-1), self._ref.reshape(-1)

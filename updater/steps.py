@@ -138,11 +138,12 @@ def is_lost(beams: Beams, cfg: UpdaterConfig) -> bool:
 
 # --- 2. changed-cells evaluator ---------------------------------------------------------------
 def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: float,
-                       cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> tuple[int, int]:
+                       cfg: UpdaterConfig, marks: np.ndarray, enclosed: np.ndarray,
+                       ws: Workspace) -> tuple[int, int]:
     """Changed flags of the detected-change beams into ``ws.changed`` (each cell once):
     new obstacles (hit cell, if M is free within tol(r)) and removed obstacles (occupied or
-    unknown cells up to p_th, all but the last, but no occupied cell within
-    ``seen_surface_radius`` of any hit of the scan). With ``cfg.fill_gaps`` also the hit cells of
+    unknown cells up to p_th, all but the last, but none within ``seen_surface_radius`` of any
+    hit of the scan, except unknown cells of the ``enclosed`` regions). With ``cfg.fill_gaps`` also the hit cells of
     agreeing beams with nothing of M within ``fill_gaps_clearance`` (counted as new-obstacle
     flags). Returns (cells flagged, new-obstacle flags)."""
     tpar = np.array([cfg.radius_near, cfg.radius_far, cfg.radius_far_range,
@@ -152,8 +153,8 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
     if radius > 0 and beams.changes:
         side = 2 * int(math.ceil(radius)) + 1
         ws.for_protected(min(beams.hx.shape[0] * side * side, ref.size))
-        n_protected = kernels().protect_seen(ref, beams.hx, beams.hy, beams.verdict, radius,
-                                             marks, ws.protected)
+        n_protected = kernels().protect_seen(ref, enclosed, beams.hx, beams.hy, beams.verdict,
+                                             radius, marks, ws.protected)
     n, n_new = kernels().flag_changed(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
                                       sensor, tpar, res, marks, ws.rows, ws.cols, ws.changed)
     if cfg.fill_gaps:

@@ -21,6 +21,14 @@ at a wrong pose, some nearby pose fits clearly better. So:
 ``PoseCheck.check`` turns these, and the localiser's covariance when there is one, into a reason
 to skip the scan ("" when the pose can be trusted). It imports only ``gridmap``; the scoring is
 the localiser's likelihood-field kernel with a table of its own, one call per grid of poses.
+
+A refusal holds for ``retry_interval`` seconds of scan time: the scans that follow within it are
+refused with the same reason and nothing is scored. The map updater does not advance its gate
+past a refused scan, so without the hold it would ask again at the scan rate (every 0.1 s at
+10 Hz), and the search grids would cost the most exactly where localisation is worst. Time is
+the scans' own: a scan no later than the refusal (another lidar's scan of the same instant, a
+stream without times) is judged afresh, and a scan earlier than the latest one seen (a new
+pass over a log, a new session with the same check) ends the hold; ``reset`` ends it too.
 """
 
 from __future__ import annotations
@@ -63,6 +71,7 @@ class PoseCheckConfig:
     coarse_steps_deg: int = 4
     max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
     max_yaw_std_deg: float = 5.0        # [deg]
+    retry_interval: float = 0.3         # [s] of scan time a refusal holds without a new fit; 0: off
 
     def __post_init__(self):
         for f in fields(self):
@@ -128,6 +137,13 @@ class PoseCheck:
                         c.fine_steps_deg),
             search_grid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
                         c.coarse_steps_deg)[1:]])
+        self._refused_at: float | None = None   # [s] scan time of the refusal that holds
+        self._refused_reason = ""
+        self._latest: float | None = None       # [s] latest scan time seen
+
+    def reset(self) -> None:
+        """Forget the refusal that holds (e.g. before a new stream of scans)."""
+        self._refused_at, self._refused_reason, self._latest = None, "", None
 
     def fit(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
         """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
@@ -150,7 +166,27 @@ class PoseCheck:
 
     def check(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
               cov: np.ndarray | None = None) -> str:
-        """"" when the pose can be trusted with the map, else why not (UNSURE_*)."""
+        """"" when the pose can be trusted with the map, else why not (UNSURE_*). Within
+        ``retry_interval`` of scan time after a refusal, the same refusal without a new fit
+        (see the module docstring)."""
+        t = float(scan.time)
+        if not math.isfinite(t):           # no usable time: no hold either way
+            self.reset()
+            return self._judge(scan, robot_pose, sensor_mount, cov)
+        if self._latest is not None and t < self._latest:
+            self.reset()                   # time went back: a new stream
+        self._latest = t
+        # (a microsecond of tolerance: 10 Hz times such as 1.3 - 1.0 are not exactly 0.3)
+        held = self._refused_at is not None and \
+            0.0 < t - self._refused_at < self.config.retry_interval - 1e-6
+        if held:
+            return self._refused_reason
+        reason = self._judge(scan, robot_pose, sensor_mount, cov)
+        self._refused_at, self._refused_reason = (t, reason) if reason else (None, "")
+        return reason
+
+    def _judge(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+               cov: np.ndarray | None) -> str:
         c = self.config
         if cov is not None:
             cov = np.asarray(cov, np.float64)

@@ -1,11 +1,14 @@
 """What a run leaves behind: maps, trajectories, metrics.json, report.md and figures.
 
-Every file is written to a temporary name and renamed, so a run killed halfway never leaves a
-truncated map or report.
+A session's own files (its maps, TUM trajectories and two figures) are written as soon as it
+ends; metrics.json, report.md and the summary figure at the end of the run. Every file is
+written to a temporary name and renamed, so a run killed halfway never leaves a truncated map
+or report.
 """
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
@@ -130,61 +133,105 @@ def _save_fig(fig, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def write_figures(out_dir: Path, run) -> None:
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    for s in run.sessions:
-        if s.previous is None:
-            continue
-        prev, upd = s.previous.data, s.updated.data
-        img = _map_rgb(s.updated)
-        removed = ((prev == OCCUPIED) & (upd == FREE))[::-1]
-        added = ((prev != OCCUPIED) & (upd == OCCUPIED))[::-1]
-        img[removed] = (0.9, 0.1, 0.1)
-        img[added] = (0.1, 0.75, 0.1)
-        fig, axes = plt.subplots(1, 3, figsize=(12, 6))
-        for ax, im, title in zip(axes, (_map_rgb(s.previous), img, _map_rgb(s.truth)),
-                                 (f"M(i-1) before {s.name}", f"M(i) after {s.name}",
-                                  f"G(i) of {s.name}")):
-            ax.imshow(im, interpolation="nearest")
-            ax.set_title(title)
-            ax.set_axis_off()
-        _save_fig(fig, out_dir / f"fig_maps_{s.name}.png")
-        plt.close(fig)
+    return plt
 
-        tr = s.trajectory.arrays()
-        x0, y0, x1, y1 = s.truth.extent()
-        fig, ax = plt.subplots(figsize=(6, 8))
-        ax.imshow(_map_rgb(s.updated), extent=(x0, x1, y0, y1), interpolation="nearest")
-        ax.plot(tr["true"][:, 0], tr["true"][:, 1], "k-", lw=1.5, label="true")
-        ax.plot(tr["previous_map"][:, 0], tr["previous_map"][:, 1], "b--", lw=1,
-                label="estimated on M(i-1)")
-        ax.plot(tr["initial_map"][:, 0], tr["initial_map"][:, 1], "r:", lw=1,
-                label="estimated on M1")
-        ax.legend(loc="lower right", fontsize=8)
-        ax.set_title(f"Trajectories in {s.name}")
-        _save_fig(fig, out_dir / f"fig_trajectories_{s.name}.png")
-        plt.close(fig)
 
-    sessions = [m for m in run.metrics["sessions"] if "change_detection" in m]
-    if sessions:
-        fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
-        names = [m["name"] for m in sessions]
-        x = np.arange(len(names))
-        for ax, key in zip(axes, ("cc", "ms", "opdf")):
-            for k, (which, label) in enumerate((("previous_vs_truth", "M(i-1)"),
-                                                ("updated_vs_truth", "M(i)"),
-                                                ("oracle_vs_truth", "oracle"))):
-                ax.bar(x + (k - 1) * 0.27, [m["map_metrics"][which][key] for m in sessions],
-                       0.27, label=label)
-            ax.set_xticks(x, names)
-            ax.set_title(key.upper() + " %")
-        axes[0].legend(fontsize=8)
-        _save_fig(fig, out_dir / "fig_metrics.png")
-        plt.close(fig)
+def session_output_paths(out_dir: Path, name: str) -> list[Path]:
+    """The files ``write_session_outputs`` writes for an update session."""
+    out_dir = Path(out_dir)
+    traj_dir = out_dir / "trajectories"
+    return [traj_dir / f"{name}_true.tum", traj_dir / f"{name}_on_previous_map.tum",
+            traj_dir / f"{name}_on_initial_map.tum", out_dir / f"fig_maps_{name}.png",
+            out_dir / f"fig_trajectories_{name}.png"]
+
+
+def write_session_trajectories(out_dir: Path, s) -> None:
+    """An update session's trajectories in TUM format: true, on M(i-1), on M1."""
+    if s.trajectory is None:
+        return
+    tr = s.trajectory.arrays()
+    traj_dir = Path(out_dir) / "trajectories"
+    traj_dir.mkdir(exist_ok=True)
+    write_tum(traj_dir / f"{s.name}_true.tum", tr["time"], tr["true"])
+    write_tum(traj_dir / f"{s.name}_on_previous_map.tum", tr["time"], tr["previous_map"])
+    write_tum(traj_dir / f"{s.name}_on_initial_map.tum", tr["time"], tr["initial_map"])
+
+
+def write_session_figures(out_dir: Path, s) -> None:
+    """An update session's figures: M(i-1), M(i) (removed cells red, added green) and G(i);
+    the trajectories on M(i). Needs the session's full result."""
+    if s.previous is None:
+        return
+    plt = _pyplot()
+    out_dir = Path(out_dir)
+    prev, upd = s.previous.data, s.updated.data
+    img = _map_rgb(s.updated)
+    removed = ((prev == OCCUPIED) & (upd == FREE))[::-1]
+    added = ((prev != OCCUPIED) & (upd == OCCUPIED))[::-1]
+    img[removed] = (0.9, 0.1, 0.1)
+    img[added] = (0.1, 0.75, 0.1)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 6))
+    for ax, im, title in zip(axes, (_map_rgb(s.previous), img, _map_rgb(s.truth)),
+                             (f"M(i-1) before {s.name}", f"M(i) after {s.name}",
+                              f"G(i) of {s.name}")):
+        ax.imshow(im, interpolation="nearest")
+        ax.set_title(title)
+        ax.set_axis_off()
+    _save_fig(fig, out_dir / f"fig_maps_{s.name}.png")
+    plt.close(fig)
+
+    tr = s.trajectory.arrays()
+    x0, y0, x1, y1 = s.truth.extent()
+    fig, ax = plt.subplots(figsize=(6, 8))
+    ax.imshow(_map_rgb(s.updated), extent=(x0, x1, y0, y1), interpolation="nearest")
+    ax.plot(tr["true"][:, 0], tr["true"][:, 1], "k-", lw=1.5, label="true")
+    ax.plot(tr["previous_map"][:, 0], tr["previous_map"][:, 1], "b--", lw=1,
+            label="estimated on M(i-1)")
+    ax.plot(tr["initial_map"][:, 0], tr["initial_map"][:, 1], "r:", lw=1,
+            label="estimated on M1")
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(f"Trajectories in {s.name}")
+    _save_fig(fig, out_dir / f"fig_trajectories_{s.name}.png")
+    plt.close(fig)
+    # A closed figure lives on in reference cycles until the collector runs: without this a
+    # run's memory climbs by the figures of several sessions.
+    gc.collect()
+
+
+def write_session_outputs(out_dir: Path, s) -> None:
+    """What a finished update session leaves besides its maps: its TUM trajectories and its
+    two figures. Written as soon as the session ends, so the run need not keep it."""
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    write_session_trajectories(out_dir, s)
+    write_session_figures(out_dir, s)
+
+
+def write_summary_figure(out_dir: Path, metrics: dict) -> None:
+    """fig_metrics.png: CC, MS and OPDF of M(i-1), M(i) and the oracle, session by session."""
+    sessions = [m for m in metrics["sessions"] if "change_detection" in m]
+    if not sessions:
+        return
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+    names = [m["name"] for m in sessions]
+    x = np.arange(len(names))
+    for ax, key in zip(axes, ("cc", "ms", "opdf")):
+        for k, (which, label) in enumerate((("previous_vs_truth", "M(i-1)"),
+                                            ("updated_vs_truth", "M(i)"),
+                                            ("oracle_vs_truth", "oracle"))):
+            ax.bar(x + (k - 1) * 0.27, [m["map_metrics"][which][key] for m in sessions],
+                   0.27, label=label)
+        ax.set_xticks(x, names)
+        ax.set_title(key.upper() + " %")
+    axes[0].legend(fontsize=8)
+    _save_fig(fig, Path(out_dir) / "fig_metrics.png")
+    plt.close(fig)
 
 
 def json_default(o):
@@ -198,17 +245,12 @@ def json_default(o):
 
 
 def write_outputs(run) -> None:
+    """What covers the whole run: metrics.json, report.md and fig_metrics.png. Each session's
+    maps, trajectories and figures were written when it ended (``write_session_maps``,
+    ``write_session_outputs``) and are not written again: ``run.sessions`` no longer holds
+    what they are drawn from."""
     out_dir = Path(run.out_dir)
-    for s in run.sessions:
-        if s.trajectory is None:
-            continue
-        tr = s.trajectory.arrays()
-        traj_dir = out_dir / "trajectories"
-        traj_dir.mkdir(exist_ok=True)
-        write_tum(traj_dir / f"{s.name}_true.tum", tr["time"], tr["true"])
-        write_tum(traj_dir / f"{s.name}_on_previous_map.tum", tr["time"], tr["previous_map"])
-        write_tum(traj_dir / f"{s.name}_on_initial_map.tum", tr["time"], tr["initial_map"])
     atomic_write_text(out_dir / "metrics.json",
                       json.dumps(run.metrics, indent=2, default=json_default) + "\n")
     atomic_write_text(out_dir / "report.md", render_report(run.metrics))
-    write_figures(out_dir, run)
+    write_summary_figure(out_dir, run.metrics)

@@ -53,6 +53,20 @@ class SessionObserver(Protocol):
 
 @dataclass
 class RunResult:
+    """A played run. ``sessions`` has one ``SessionResult`` per session, in order, but keeps
+    whole only what the run's memory can afford whatever the number of sessions:
+
+    - ``sessions[0]`` (W1): its name, metrics and M1 (``updated``), on which every later
+      session localises; G1 is dropped once the next session starts;
+    - ``sessions[-1]``: the last session's full result (M_i, G_i, M_{i-1}, the oracle, the
+      trajectories, the evaluation masks);
+    - every session between: a light result, its name and metrics only.
+
+    A run of one session keeps it whole. What a light result dropped is in ``out_dir``
+    (``maps/M_<name>.yaml``, ``maps/G_<name>.yaml``, ``maps/masks_<name>.npz``,
+    ``trajectories/``); ``metrics`` is ``metrics.json``, with every session's entry.
+    """
+
     scenario: str
     seed: int
     out_dir: Path
@@ -127,6 +141,13 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     return result
 
 
+def light_result(res: SessionResult, keep_map: bool = False) -> SessionResult:
+    """``res`` as a run keeps it once its outputs are on disk: name and metrics, and M_i if
+    ``keep_map``. A new object, so whoever else holds ``res`` (an observer) still has it whole."""
+    return SessionResult(res.name, res.updated if keep_map else None, None,
+                         metrics=res.metrics)
+
+
 def default_out_dir(scenario_name: str) -> Path:
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{scenario_name}-{stamp}"
@@ -137,7 +158,7 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     import sim
 
     from . import checkpoint
-    from .report import write_outputs, write_session_maps
+    from .report import write_outputs, write_session_maps, write_session_outputs
 
     options = options or RunOptions()
     if options.resume:
@@ -160,17 +181,25 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
         results, wall_before = checkpoint.finished_sessions(out_dir, scn, n)
     else:
         checkpoint.write_manifest(out_dir, path, seed, options)
+    # Memory per session is bounded: a finished session's outputs go to disk at once, and the
+    # run keeps of it only what later sessions need (see RunResult).
     with _progress(options.progress, desc="sessions", total=n, unit="session",
                    initial=len(results)) as bar:
         for i in range(len(results), n):
             if i == 0:
                 res = build_initial_map(scn, 0, seeds[0], options.progress)
             else:
+                # M_{i-1} is all this session needs of the last one
+                results[-1] = light_result(results[-1], keep_map=True)
                 res = run_update_session(scn, i, results[-1].updated, results[0].updated,
                                          seeds[i], options)
+            # everything of the session on disk before save_session commits it
             write_session_maps(out_dir, res)
+            write_session_outputs(out_dir, res)
             results.append(res)
             checkpoint.save_session(out_dir, results, wall_before + time.perf_counter() - wall0)
+            if len(results) > 2:   # the one before: name and metrics (M_{i-1} is res.previous)
+                results[-2] = light_result(results[-2])
             bar.update(1)
 
     metrics = {

@@ -64,9 +64,18 @@ class Trajectory:
 
 @dataclass
 class SessionResult:
+    """What one session produced. A full result (``UpdateSession.result``) has every field;
+    the mapping session W1 has no ``previous``, ``oracle``, ``trajectory`` or ``masks``.
+
+    Once a session's outputs are on disk, a run keeps it only in part (see ``RunResult``): a
+    light result has its ``name`` and ``metrics``, maybe its ``updated`` map, and ``None`` or
+    empty in every other field. What it dropped is in the run's folder (``maps/``,
+    ``trajectories/``, ``state/``).
+    """
+
     name: str
-    updated: OccupancyGrid                 # M_i
-    truth: OccupancyGrid                   # G_i
+    updated: OccupancyGrid | None          # M_i
+    truth: OccupancyGrid | None            # G_i
     previous: OccupancyGrid | None = None  # M_{i-1}
     oracle: OccupancyGrid | None = None
     trajectory: Trajectory | None = None

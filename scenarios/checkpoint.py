@@ -5,7 +5,8 @@ A run's folder holds, besides its outputs, ``state/``:
 - ``run.json``: what defines the run (scenario file and a hash of its text, seed, sessions asked
   for, quick routes, the pose check, the configurations), written once at the start;
 - ``session_<name>.json`` and ``session_<name>.npz``: a finished session's metrics and
-  trajectories; its maps (M_i, G_i, the oracle, the evaluation masks) are in ``maps/``;
+  trajectories; its maps (M_i, G_i, the oracle, the evaluation masks) are in ``maps/``, its
+  TUM trajectories in ``trajectories/`` and its figures in the run's folder;
 - ``progress.json``: the finished sessions in order. It is written last, after everything of
   the session is on disk, so it is the commit point: a session not listed there is run again.
 
@@ -13,7 +14,9 @@ Every file is written to a temporary name and renamed, so a run killed at any in
 each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
 seeds, which are derived per session from the scenario's seed): maps are saved as trinary
 images, which load back cell for cell, so a resumed run ends with the same maps as a run that
-was never interrupted.
+was never interrupted. A resumed run reads back only what the next sessions need (M1, the
+last finished session whole, the metrics of the others), so its memory does not grow with the
+number of sessions finished.
 """
 
 from __future__ import annotations
@@ -151,11 +154,12 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
 
 
 def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
-    """The results of the sessions a run in ``out_dir`` finished (at most ``n``), rebuilt from
-    disk, and the wall time they took."""
+    """The results of the sessions a run in ``out_dir`` finished (at most ``n``), read back as
+    a run keeps them (``runner.RunResult``): the last one whole, the first with M1, the others
+    their name and metrics only; and the wall time they took."""
     from gridmap import load_map
 
-    from .session import SessionResult, Trajectory
+    from .session import SessionResult
 
     path = state_dir(out_dir) / "progress.json"
     if not path.exists():
@@ -166,21 +170,54 @@ def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     if done != names[:len(done)]:
         raise ResumeError(f"{path}: finished sessions {done} are not the scenario's first "
                           f"sessions {names[:len(done)]}")
-    maps = Path(out_dir) / "maps"
     results = []
-    for name in done:
-        metrics = _read_json(state_dir(out_dir) / f"session_{name}.json")["metrics"]
-        res = SessionResult(name, load_map(maps / f"M_{name}.yaml"),
-                            load_map(maps / f"G_{name}.yaml"), metrics=metrics)
-        if results:
-            res.previous = results[-1].updated
-            res.oracle = load_map(maps / f"oracle_{name}.yaml")
-            res.trajectory = _trajectory(state_dir(out_dir) / f"session_{name}.npz",
-                                         Trajectory)
-            with np.load(maps / f"masks_{name}.npz") as z:
-                res.masks = {k: z[k] for k in z.files}
+    for k, name in enumerate(done):
+        if k == len(done) - 1:
+            res = load_session(out_dir, name, done[k - 1] if k else None)
+        else:
+            res = SessionResult(name, None, None, metrics=_metrics(out_dir, name))
+            if k == 0:
+                res.updated = load_map(Path(out_dir) / "maps" / f"M_{name}.yaml")
         results.append(res)
     return results, float(progress.get("wall_time_s", 0.0))
+
+
+def _metrics(out_dir, name: str) -> dict:
+    return _read_json(state_dir(out_dir) / f"session_{name}.json")["metrics"]
+
+
+def load_session(out_dir, name: str, previous: str | None = None):
+    """The full result of the finished session ``name``, read back from ``out_dir``;
+    ``previous``: the name of the session before it (None for the mapping session)."""
+    from gridmap import load_map
+
+    from .session import SessionResult, Trajectory
+
+    maps = Path(out_dir) / "maps"
+    res = SessionResult(name, load_map(maps / f"M_{name}.yaml"),
+                        load_map(maps / f"G_{name}.yaml"), metrics=_metrics(out_dir, name))
+    if previous is not None:
+        res.previous = load_map(maps / f"M_{previous}.yaml")
+        res.oracle = load_map(maps / f"oracle_{name}.yaml")
+        res.trajectory = _trajectory(state_dir(out_dir) / f"session_{name}.npz", Trajectory)
+        with np.load(maps / f"masks_{name}.npz") as z:
+            res.masks = {k: z[k] for k in z.files}
+    return res
+
+
+def restore_session_outputs(out_dir, names: list[str]) -> list[str]:
+    """Write the TUM trajectories and figures of the finished update sessions ``names[1:]``
+    that lack them (a run folder of an earlier version wrote them only at the end of the
+    run), with one session in memory at a time. Returns the names of the sessions written."""
+    from .report import session_output_paths, write_session_outputs
+
+    written = []
+    for k in range(1, len(names)):
+        if all(p.exists() for p in session_output_paths(out_dir, names[k])):
+            continue
+        write_session_outputs(out_dir, load_session(out_dir, names[k], names[k - 1]))
+        written.append(names[k])
+    return written
 
 
 def _trajectory(path: Path, cls):

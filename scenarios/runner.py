@@ -179,6 +179,7 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     wall_before = 0.0
     if options.resume:
         results, wall_before = checkpoint.finished_sessions(out_dir, scn, n)
+        checkpoint.restore_session_outputs(out_dir, [r.name for r in results])
     else:
         checkpoint.write_manifest(out_dir, path, seed, options)
     # Memory per session is bounded: a finished session's outputs go to disk at once, and the

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim import geometry as geo
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_soak as soak  # noqa: E402
 
@@ -24,10 +26,16 @@ def short_soak():
 def test_rearrangements_are_seeded_valid_and_in_view(short_soak):
     scn, moved, _ = short_soak
     assert [s.name for s in scn.sessions] == ["W1", "S02", "S03", "S04", "S05"]
-    assert moved == ["clutter_d", "clutter_c1, pallet_2, pallet_jack",
-                     "bucket_2, pallet_1, trash_can", "clutter_c4, pallet_2"]
+    assert moved == ["clutter_d", "clutter_c1, pallet_2, pallet_jack", "clutter_a3, pallet_1",
+                     "pallet_1"]
     again, moved_again = soak.soak_scenario(4, seed=2024)
     assert moved_again == moved and again.sessions == scn.sessions
+    # without the lane margin, the placements the scenario checks alone accept (S03 then sets
+    # the pallet jack down 0.27 m from the robot at its start, and the draws part from there)
+    _, moved_hugging = soak.soak_scenario(4, seed=2024, lane_margin=0.0)
+    assert moved_hugging == ["clutter_d", "clutter_c1, pallet_2, pallet_jack",
+                             "bucket_2, pallet_1, trash_can", "clutter_c4, pallet_2"]
+    path = np.vstack([[scn.robot.start.x, scn.robot.start.y], scn.sessions[1].route])
     for i, s in enumerate(scn.sessions[1:], start=1):
         assert s.route == scn.sessions[1].route and len(s.changes) >= 1
         seen_before = soak.seen_objects(scn, i - 1) if i > 1 else None
@@ -38,16 +46,21 @@ def test_rearrangements_are_seeded_valid_and_in_view(short_soak):
             assert soak.MIN_SHIFT - 1e-3 <= shift <= soak.MAX_SHIFT + 1e-3
             if seen_before is not None:
                 assert ch.id in seen_before
+            # every object set down keeps a lane of LANE_MARGIN beside the robot's path
+            o = next(o for o in scn.obstacles(i) if o.id == ch.id)
+            clear = min(float(geo.segment_box_distance(a, b, o.box()[None])[0])
+                        for a, b in zip(path[:-1], path[1:]))
+            assert clear >= scn.robot.radius + soak.LANE_MARGIN - 1e-9
 
 
 def test_memory_time_and_scores_stay_level(short_soak):
     _, _, rows = short_soak
-    assert len(rows) == 4 and all(r.scans_processed > 50 for r in rows)
+    assert len(rows) == 4 and all(r.scans_processed >= 40 for r in rows)
     mem = np.array([r.peak_rss_mb for r in rows])
     assert mem.max() / mem.min() < 1.05
     wall = np.array([r.wall_s for r in rows])
     assert wall.max() < 2 * np.median(wall)
-    assert [round(r.precision, 3) for r in rows] == [0.816, 0.976, 0.947, 0.897]
-    assert [round(r.recall, 3) for r in rows] == [0.374, 0.732, 0.770, 0.567]
-    assert [r.targets for r in rows] == [115, 395, 426, 342]
+    assert [round(r.precision, 3) for r in rows] == [0.826, 0.957, 0.963, 0.895]
+    assert [round(r.recall, 3) for r in rows] == [0.337, 0.734, 0.701, 0.431]
+    assert [r.targets for r in rows] == [98, 394, 334, 276]
     assert all(r.updater_state_mb < 2.0 for r in rows)

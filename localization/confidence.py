@@ -53,7 +53,8 @@ UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
 class PoseCheckConfig:
     """Thresholds of the pose check. Measured on the warehouse's W2 route at the true poses
     plus an offset (benchmarks/bench_mislocalisation.py), the defaults refuse 1 % of the scans
-    without an offset, 6 % at 0.5 deg, 30 % at 5 cm, and 98-100 % from 7.5 cm or 1 deg on."""
+    without an offset, 6 % at 0.5 deg, 30 % at 5 cm, and 98-100 % from 7.5 cm or 1 deg on (the
+    fit's verdicts; the hold of ``retry_interval`` adds the scans that follow a refusal)."""
 
     max_gain: float = 0.01              # [1] a better pose this much better: the pose is off ...
     min_correction: float = 0.06        # [m] ... when it lies at least this far away

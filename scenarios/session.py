@@ -92,11 +92,23 @@ class ChangeTally:
     wrong: int = 0
 
 
+def localizer_config_for(scenario):
+    """The localiser's defaults with its motion model set to the robot's odometry noise, as
+    one tunes AMCL's alphas for a robot: nav2's default alphas (0.2) are four to twenty times
+    this robot's, and so wide a motion model lets the estimate slide along an aisle towards an
+    old outline where the map is stale."""
+    from localization import LocalizerConfig
+
+    a1, a2, a3, a4 = scenario.robot.odometry_noise
+    return LocalizerConfig(alpha1=a1, alpha2=a2, alpha3=a3, alpha4=a4)
+
+
 class UpdateSession:
     """The robot software of one session: a localiser on the reference map M_{i-1}, one on M1
     (for the comparison), the updater on M_{i-1}, and the bookkeeping of the scores.
 
-    ``localizer_seed``: both localisers use it, as the evaluation asks. ``pose_check``: the
+    ``localizer_seed``: both localisers use it, as the evaluation asks. ``localizer_config``:
+    by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas). ``pose_check``: the
     safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
     """
 
@@ -120,6 +132,8 @@ class UpdateSession:
         self.frame = sim.grid_frame(scenario)
         self.mounts = [lidar.mount for lidar in scenario.robot.lidars]
         start, cov = world.true_pose, np.diag(np.square(START_STD))
+        if localizer_config is None:
+            localizer_config = localizer_config_for(scenario)
         self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
         self.localizer_initial = MonteCarloLocalizer(initial, localizer_config,
                                                      seed=localizer_seed)

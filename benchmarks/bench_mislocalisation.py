@@ -23,7 +23,8 @@ when a pose of a small grid around the one given fits the scan to M1 clearly bet
 
 Bars (exit 1 when missed), with the pose check: no G-occupied cell freed from 0.1 m or 1 deg of
 error on, nor after the kidnapping; no hole at any level. Below that (0.05 m, 0.5 deg: under a
-cell, which the map cannot tell) a few outline cells flip with or without the check.
+cell, which the pose check cannot tell) the updater's seen-surface guard
+(``UpdaterConfig.seen_surface_radius``, in the plain columns too) keeps all but 0-2 cells.
 """
 
 from __future__ import annotations

@@ -50,9 +50,9 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
-    # Not in the paper: an occupied cell of M within this distance of the hit point of any
-    # valid beam of the scan (a surface the scan sees) gets no removed-obstacle flag from that
-    # scan. Under a pose error below a cell the rays that graze an object's corner cross its
+    # Not in the paper: an occupied cell of M (or an unknown one outside the enclosed regions)
+    # within this distance of the hit point of any valid beam of the scan (a surface the scan
+    # sees) gets no removed-obstacle flag from that scan. Under a pose error below a cell the rays that graze an object's corner cross its
     # outline cells while the beams that hit the object say it is still there (README,
     # "Choices").
     seen_surface_radius: float = 0.075       # [m]; 0: off

@@ -142,10 +142,10 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
                        ws: Workspace) -> tuple[int, int]:
     """Changed flags of the detected-change beams into ``ws.changed`` (each cell once):
     new obstacles (hit cell, if M is free within tol(r)) and removed obstacles (occupied or
-    unknown cells up to p_th, all but the last, but none within ``seen_surface_radius`` of any
-    hit of the scan, except unknown cells of the ``enclosed`` regions). With ``cfg.fill_gaps`` also the hit cells of
-    agreeing beams with nothing of M within ``fill_gaps_clearance`` (counted as new-obstacle
-    flags). Returns (cells flagged, new-obstacle flags)."""
+    unknown cells up to p_th, all but the last; none within ``seen_surface_radius`` of any hit
+    of the scan, unless an unknown cell of the ``enclosed`` regions). With ``cfg.fill_gaps``
+    also the hit cells of agreeing beams with nothing of M within ``fill_gaps_clearance``
+    (counted as new-obstacle flags). Returns (cells flagged, new-obstacle flags)."""
     tpar = np.array([cfg.radius_near, cfg.radius_far, cfg.radius_far_range,
                      cfg.removed_skip_fraction, cfg.removed_skip_min])
     n_protected = 0

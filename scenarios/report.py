@@ -143,7 +143,8 @@ def _pyplot():
 
 
 def session_output_paths(out_dir: Path, name: str) -> list[Path]:
-    """The files ``write_session_outputs`` writes for an update session."""
+    """The files ``write_session_outputs`` writes for an update session: its three TUM
+    trajectories (true, on M(i-1), on M1), then its two figures (maps, trajectories)."""
     out_dir = Path(out_dir)
     traj_dir = out_dir / "trajectories"
     return [traj_dir / f"{name}_true.tum", traj_dir / f"{name}_on_previous_map.tum",
@@ -156,11 +157,10 @@ def write_session_trajectories(out_dir: Path, s) -> None:
     if s.trajectory is None:
         return
     tr = s.trajectory.arrays()
-    traj_dir = Path(out_dir) / "trajectories"
-    traj_dir.mkdir(exist_ok=True)
-    write_tum(traj_dir / f"{s.name}_true.tum", tr["time"], tr["true"])
-    write_tum(traj_dir / f"{s.name}_on_previous_map.tum", tr["time"], tr["previous_map"])
-    write_tum(traj_dir / f"{s.name}_on_initial_map.tum", tr["time"], tr["initial_map"])
+    paths = session_output_paths(out_dir, s.name)[:3]
+    paths[0].parent.mkdir(exist_ok=True)
+    for path, key in zip(paths, ("true", "previous_map", "initial_map")):
+        write_tum(path, tr["time"], tr[key])
 
 
 def write_session_figures(out_dir: Path, s) -> None:
@@ -169,7 +169,7 @@ def write_session_figures(out_dir: Path, s) -> None:
     if s.previous is None:
         return
     plt = _pyplot()
-    out_dir = Path(out_dir)
+    maps_png, trajectories_png = session_output_paths(out_dir, s.name)[3:]
     prev, upd = s.previous.data, s.updated.data
     img = _map_rgb(s.updated)
     removed = ((prev == OCCUPIED) & (upd == FREE))[::-1]
@@ -183,7 +183,7 @@ def write_session_figures(out_dir: Path, s) -> None:
         ax.imshow(im, interpolation="nearest")
         ax.set_title(title)
         ax.set_axis_off()
-    _save_fig(fig, out_dir / f"fig_maps_{s.name}.png")
+    _save_fig(fig, maps_png)
     plt.close(fig)
 
     tr = s.trajectory.arrays()
@@ -197,7 +197,7 @@ def write_session_figures(out_dir: Path, s) -> None:
             label="estimated on M1")
     ax.legend(loc="lower right", fontsize=8)
     ax.set_title(f"Trajectories in {s.name}")
-    _save_fig(fig, out_dir / f"fig_trajectories_{s.name}.png")
+    _save_fig(fig, trajectories_png)
     plt.close(fig)
     # A closed figure lives on in reference cycles until the collector runs: without this a
     # run's memory climbs by the figures of several sessions.

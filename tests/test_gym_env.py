@@ -223,15 +223,3 @@ def test_evaluate_tables_one_row_per_seed(room, m1):
     table = evaluate(RouteFollowingPolicy(), room, seeds=[1, 2], session="W2",
                      reference_map=m1, control_period=0.1)
     assert table.column("seed") == [1, 2] and len(table.scores) == 2
-
-
-def test_gymnasium_is_imported_in_the_env_module_only():
-    import pathlib
-    import re
-
-    root = pathlib.Path(scenarios.__file__).resolve().parents[1]
-    pattern = re.compile(r"^\s*(import|from)\s+gymnasium\b", re.M)
-    users = sorted(str(p.relative_to(root)) for pkg in ("gridmap", "sim", "updater",
-                                                         "localization", "scenarios")
-                   for p in (root / pkg).rglob("*.py") if pattern.search(p.read_text()))
-    assert users == ["scenarios/gym_env.py"]

@@ -1,6 +1,8 @@
 """The import direction of DESIGN.md: the robot software never pulls in the simulator or the
 optional front ends, so it runs on real data with nothing else installed."""
 
+import pathlib
+import re
 import subprocess
 import sys
 
@@ -35,3 +37,14 @@ def test_command_line_starts_without_compiling_kernels():
     code = "import sys, scenarios.cli\nprint('numba' in sys.modules)\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("front_end, module", [("gymnasium", "scenarios/gym_env.py"),
+                                               ("rerun", "scenarios/rerun_log.py")])
+def test_each_optional_front_end_is_imported_by_one_module_only(front_end, module):
+    root = pathlib.Path(__file__).resolve().parents[1]
+    pattern = re.compile(rf"^\s*(import|from)\s+{front_end}\b", re.M)
+    users = sorted(str(p.relative_to(root)) for pkg in ("gridmap", "sim", "updater",
+                                                         "localization", "scenarios")
+                   for p in (root / pkg).rglob("*.py") if pattern.search(p.read_text()))
+    assert users == [module]

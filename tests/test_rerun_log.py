@@ -89,17 +89,3 @@ def test_command_line_writes_a_recording_and_never_spawns_without_a_display(
 def test_a_recorder_needs_somewhere_to_write():
     with pytest.raises(ValueError):
         RerunRecorder(None, spawn=False)
-
-
-def test_rerun_is_imported_in_the_recording_module_only():
-    import pathlib
-    import re
-
-    import scenarios
-
-    root = pathlib.Path(scenarios.__file__).resolve().parents[1]
-    pattern = re.compile(r"^\s*(import|from)\s+rerun\b", re.M)
-    users = sorted(str(p.relative_to(root)) for pkg in ("gridmap", "sim", "updater",
-                                                         "localization", "scenarios")
-                   for p in (root / pkg).rglob("*.py") if pattern.search(p.read_text()))
-    assert users == ["scenarios/rerun_log.py"]

@@ -156,7 +156,7 @@ def replay(rec: Recording, poses: np.ndarray, guard=None, config=None) -> Damage
     dmg = Damage()
     for k, scan in enumerate(rec.scans):
         pose = Pose2D(*poses[k])
-        check = None if guard is None else partial(guard.check, scan, pose, rec.mount)
+        check = None if guard is None else partial(guard.for_updater, scan, pose, rec.mount)
         report = upd.process(scan, pose.compose(rec.mount), odometry=Pose2D(*rec.odom[k]),
                              pose_check=check)
         dmg.unsure += report.reason.startswith("pose unsure")

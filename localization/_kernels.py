@@ -62,6 +62,35 @@ def likelihood_field(poses, mount, beams, table, frame, off_value, base, out):
 
 
 @njit(cache=True)
+def interpolated_fit(poses, mount, beams, residual, frame, out):
+    """Mean squared residual of every pose: ``out[i] = mean_j r(end point j)^2`` with r the
+    ``residual`` grid (values at cell centres) interpolated bilinearly, so the score is smooth
+    below a cell, unlike a per-cell table. Arguments as in ``likelihood_field``; end points
+    off the grid score 1."""
+    h, w = residual.shape
+    ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
+    cm, sm = math.cos(mount[2]), math.sin(mount[2])
+    for i in range(poses.shape[0]):
+        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        sx = poses[i, 0] + c * mount[0] - s * mount[1]
+        sy = poses[i, 1] + s * mount[0] + c * mount[1]
+        cs, ss = c * cm - s * sm, s * cm + c * sm
+        total = 0.0
+        for j in range(beams.shape[0]):
+            gx = (sx + cs * beams[j, 0] - ss * beams[j, 1] - ox) * inv_res - 0.5
+            gy = (sy + ss * beams[j, 0] + cs * beams[j, 1] - oy) * inv_res - 0.5
+            if gx < 0.0 or gy < 0.0 or gx > w - 1 or gy > h - 1:
+                total += 1.0
+                continue
+            c0, r0 = min(int(gx), w - 2), min(int(gy), h - 2)
+            fx, fy = gx - c0, gy - r0
+            v = (residual[r0, c0] * (1 - fx) + residual[r0, c0 + 1] * fx) * (1 - fy) + \
+                (residual[r0 + 1, c0] * (1 - fx) + residual[r0 + 1, c0 + 1] * fx) * fy
+            total += v * v
+        out[i] = total / max(beams.shape[0], 1)
+
+
+@njit(cache=True)
 def bin_keys(poses, bin_size, n_theta, out):
     """The KLD histogram bin of every pose as one int64 key; theta bins wrap around."""
     for i in range(poses.shape[0]):

@@ -73,10 +73,22 @@ class PoseCheckConfig:
     max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
     max_yaw_std_deg: float = 5.0        # [deg]
     retry_interval: float = 0.3         # [s] of scan time a refusal holds without a new fit; 0: off
+    # ``PoseCheck.refine``: the pose the updater gets is the best fit near a trusted one, polished
+    # on a grid of +-polish_steps steps each way; a caller such as scenarios.session asks for
+    # it when ``refine`` is on
+    refine: bool = True
+    polish_step: float = 0.005          # [m]
+    polish_step_deg: float = 0.1        # [deg]
+    polish_steps: int = 5
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.type == "bool":
+                if not isinstance(v, bool):
+                    raise LocalizationError(f"pose check key '{f.name}' must be true or false, "
+                                            f"got {v!r}")
+                continue
             if f.type == "int":
                 ok = isinstance(v, int) and not isinstance(v, bool) and v >= (
                     2 if f.name == "max_beams" else 0)
@@ -132,12 +144,15 @@ class PoseCheck:
         residual = dist / np.float32(c.cap)
         # The kernel sums table entries: the negative squared residual, so higher is better.
         self._table = np.ascontiguousarray(-(residual * residual), dtype=np.float32)
+        self._residual = np.ascontiguousarray(residual, dtype=np.float32)
         self._frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
         self._offsets = np.vstack([
             search_grid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
                         c.fine_steps_deg),
             search_grid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
                         c.coarse_steps_deg)[1:]])
+        self._polish = search_grid(c.polish_step, c.polish_steps, math.radians(c.polish_step_deg),
+                                   c.polish_steps)
         self._refused_at: float | None = None   # [s] scan time of the refusal that holds
         self._refused_reason = ""
         self._latest: float | None = None       # [s] latest scan time seen
@@ -150,26 +165,73 @@ class PoseCheck:
         """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
         ``sensor_mount`` (robot frame), and the best pose of the search grids around it; None
         when the scan has no valid beam."""
-        from . import _kernels
-
         beams = select_beams(scan, self.config.max_beams)
         if beams.count == 0:
             return None
-        poses = robot_pose.as_array() + self._offsets
-        score = np.empty(poses.shape[0])
-        _kernels.likelihood_field(poses, sensor_mount.as_array(), beams.points, self._table,
-                                  self._frame, -1.0, 0.0, score)
-        score /= -beams.count
+        score = self._scores(robot_pose.as_array() + self._offsets, sensor_mount, beams)
         best = int(np.argmin(score))
         dx, dy, dth = self._offsets[best]
         return PoseFit(float(score[0]), float(score[0] - score[best]),
                        Pose2D(float(dx), float(dy), float(dth)), beams.count)
+
+    def _scores(self, poses: np.ndarray, sensor_mount: Pose2D, beams) -> np.ndarray:
+        """The fit of every pose (N, 3), one kernel call."""
+        from . import _kernels
+
+        score = np.empty(poses.shape[0])
+        _kernels.likelihood_field(poses, sensor_mount.as_array(), beams.points, self._table,
+                                  self._frame, -1.0, 0.0, score)
+        return score / -beams.count
+
+    def refine(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+               cov: np.ndarray | None = None) -> str | Pose2D:
+        """The check, and for a trusted pose the pose that fits the scan best near it: a
+        reason to skip the scan (as ``check``), or the robot pose to use instead of
+        ``robot_pose``. That pose is the search grids' best one when it lies within
+        ``min_correction`` / ``min_correction_deg`` (a farther best pose that the check let
+        pass gains too little to move to), polished on a grid of ``polish_step`` and
+        ``polish_step_deg`` around it. A localiser's estimate between its updates carries
+        the odometry's drift since the last one, a few centimetres; faces the updater draws
+        from such poses land a cell or two off and are then, being within the pairing
+        distance of the truth, never corrected (README, "Choices")."""
+        reason, f = self._check(scan, robot_pose, sensor_mount, cov)
+        if reason:
+            return reason
+        if f is None:
+            return robot_pose
+        c = self.config
+        base = robot_pose.as_array()
+        if not self._far(f.correction):
+            base = base + f.correction.as_array()
+        from . import _kernels
+
+        beams = select_beams(scan, c.max_beams)
+        poses = base + self._polish
+        score = np.empty(poses.shape[0])
+        _kernels.interpolated_fit(poses, sensor_mount.as_array(), beams.points, self._residual,
+                                  self._frame, score)
+        x, y, th = poses[int(np.argmin(score))]
+        return Pose2D(float(x), float(y), float(th))
+
+    def for_updater(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+                    cov: np.ndarray | None = None) -> str | Pose2D:
+        """What ``updater.MapUpdater.process`` asks its ``pose_check``: a reason to skip the
+        scan, "" to trust the pose, or, with ``refine`` on, the sensor pose to use (the refined
+        robot pose composed with ``sensor_mount``)."""
+        if not self.config.refine:
+            return self.check(scan, robot_pose, sensor_mount, cov)
+        verdict = self.refine(scan, robot_pose, sensor_mount, cov)
+        return verdict if isinstance(verdict, str) else verdict.compose(sensor_mount)
 
     def check(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
               cov: np.ndarray | None = None) -> str:
         """"" when the pose can be trusted with the map, else why not (UNSURE_*). Within
         ``retry_interval`` of scan time after a refusal, the same refusal without a new fit
         (see the module docstring)."""
+        return self._check(scan, robot_pose, sensor_mount, cov)[0]
+
+    def _check(self, scan, robot_pose, sensor_mount, cov) -> tuple[str, PoseFit | None]:
+        """(reason, the fit when one was made)."""
         t = float(scan.time)
         if not math.isfinite(t):           # no usable time: no hold either way
             self.reset()
@@ -181,23 +243,26 @@ class PoseCheck:
         held = self._refused_at is not None and \
             0.0 < t - self._refused_at < self.config.retry_interval - 1e-6
         if held:
-            return self._refused_reason
-        reason = self._judge(scan, robot_pose, sensor_mount, cov)
+            return self._refused_reason, None
+        reason, f = self._judge(scan, robot_pose, sensor_mount, cov)
         self._refused_at, self._refused_reason = (t, reason) if reason else (None, "")
-        return reason
+        return reason, f
 
     def _judge(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
-               cov: np.ndarray | None) -> str:
+               cov: np.ndarray | None) -> tuple[str, PoseFit | None]:
         c = self.config
         if cov is not None:
             cov = np.asarray(cov, np.float64)
             if not np.all(np.isfinite(cov)) or \
                     np.linalg.eigvalsh(cov[:2, :2]).max() > c.max_position_std ** 2 or \
                     cov[2, 2] > math.radians(c.max_yaw_std_deg) ** 2:
-                return UNSURE_COVARIANCE
+                return UNSURE_COVARIANCE, None
         f = self.fit(scan, robot_pose, sensor_mount)
         if f is None:
-            return ""
-        far = math.hypot(f.correction.x, f.correction.y) >= c.min_correction - 1e-9 or \
-            abs(f.correction.theta) >= math.radians(c.min_correction_deg) - 1e-9
-        return UNSURE_FIT if f.gain > c.max_gain and far else ""
+            return "", None
+        return (UNSURE_FIT if f.gain > c.max_gain and self._far(f.correction) else ""), f
+
+    def _far(self, correction: Pose2D) -> bool:
+        c = self.config
+        return math.hypot(correction.x, correction.y) >= c.min_correction - 1e-9 or \
+            abs(correction.theta) >= math.radians(c.min_correction_deg) - 1e-9

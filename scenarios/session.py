@@ -171,7 +171,7 @@ class UpdateSession:
         t2 = time.process_time()
         # asked by the updater only for scans that pass its gate
         check = None if self.guard is None else partial(
-            self.guard.check, msg.scan, est, mount, self.localizer.estimate().cov)
+            self.guard.for_updater, msg.scan, est, mount, self.localizer.estimate().cov)
         report = self.updater.process(msg.scan, est.compose(mount), odometry=msg.odom_pose,
                                       pose_check=check)
         t3 = time.process_time()

@@ -338,3 +338,47 @@ def test_recovery_injects_only_while_the_likelihood_is_low():
         r.observe(math.log(1.0))
     assert 0.5 < r.injection_probability() < 0.8
     assert Recovery(0.0, 0.0).injection_probability() == 0.0
+
+
+def reference_interpolated_fit(residual, frame, poses, mount, points):
+    """Plain NumPy: end points in the map, bilinear interpolation between cell centres."""
+    ox, oy, res = frame
+    h, w = residual.shape
+    out = []
+    for x, y, th in poses:
+        sx = x + math.cos(th) * mount.x - math.sin(th) * mount.y
+        sy = y + math.sin(th) * mount.x + math.cos(th) * mount.y
+        a = th + mount.theta
+        px = sx + math.cos(a) * points[:, 0] - math.sin(a) * points[:, 1]
+        py = sy + math.sin(a) * points[:, 0] + math.cos(a) * points[:, 1]
+        gx, gy = (px - ox) / res - 0.5, (py - oy) / res - 0.5
+        total = 0.0
+        for u, v in zip(gx, gy):
+            if u < 0 or v < 0 or u > w - 1 or v > h - 1:
+                total += 1.0
+                continue
+            c0, r0 = min(int(u), w - 2), min(int(v), h - 2)
+            fx, fy = u - c0, v - r0
+            patch = residual[r0:r0 + 2, c0:c0 + 2].astype(np.float64)
+            val = np.array([1 - fy, fy]) @ patch @ np.array([1 - fx, fx])
+            total += val * val
+        out.append(total / len(points))
+    return np.array(out)
+
+
+def test_interpolated_fit_kernel_matches_reference():
+    from localization import _kernels
+
+    rng = np.random.default_rng(5)
+    grid = small_world()
+    residual = np.ascontiguousarray(rng.uniform(0, 1, grid.shape), np.float32)
+    frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
+    poses = np.column_stack((rng.uniform(-1.5, 2.5, 100), rng.uniform(-1, 2, 100),
+                             rng.uniform(-np.pi, np.pi, 100)))
+    beams = select_beams(Scan(rng.uniform(0.1, 3.0, 45), -2.0, 4.0 / 44, 0.05, 20.0), 60)
+    mount = Pose2D(0.2, -0.05, 0.1)
+    got = np.empty(len(poses))
+    _kernels.interpolated_fit(poses, mount.as_array(), beams.points, residual, frame, got)
+    want = reference_interpolated_fit(residual, frame, poses, mount, beams.points)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    assert (want < 1.0).any() and (want > 0.0).all()

@@ -118,7 +118,8 @@ class MapUpdater:
         ``pose_check``, when given, is asked only for scans that pass the gate (so a costly
         check runs a few times per metre, not at the scan rate): it returns "" when the pose
         can be trusted, else a reason, and the scan is then a counted skip that, like a lost
-        scan, does not advance the gate."""
+        scan, does not advance the gate. It may also return a ``Pose2D``: the pose is trusted
+        and that sensor pose (e.g. ``sensor_pose`` matched to M) is used instead."""
         self._check_input(scan, sensor_pose, odometry)
         cfg = self.config
         self._counts["scans"] += 1
@@ -134,10 +135,16 @@ class MapUpdater:
         if not (0 <= sensor[0] < width and 0 <= sensor[1] < height):
             self._counts["skipped"] += 1
             return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
-        reason = pose_check() if pose_check is not None else ""
-        if reason:
+        verdict = pose_check() if pose_check is not None else ""
+        if isinstance(verdict, Pose2D):         # trusted, and a better sensor pose to use
+            if not verdict.is_finite():
+                raise UpdaterError(f"pose_check returned a non-finite sensor pose {verdict}")
+            sensor = steps.to_grid(verdict, self._origin, self._res)
+            verdict = "" if 0 <= sensor[0] < width and 0 <= sensor[1] < height else \
+                SKIPPED_OFF_MAP
+        if verdict:
             self._counts["skipped"] += 1
-            return ScanReport(t, False, reason, changed_cells=self._n_changed)
+            return ScanReport(t, False, verdict, changed_cells=self._n_changed)
 
         beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
         self._counts["processed"] += 1

@@ -285,16 +285,17 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
             if source == "localizer" and localizer is None and obs.odom is not None:
                 localizer = _start_localizer(grid, obs, localizer_config, initial_pose,
                                              initial_std, seed)
-            sensor = _sensor_pose(obs, source, localizer, counts)
-            if sensor is None:
+            posed = _robot_pose(obs, source, localizer, counts)
+            if posed is None:
                 counts["scans_without_pose"] += 1
                 continue
+            robot, mount = posed
+            sensor = robot.compose(mount)
             counts["scans_used"] += 1
             check = None
             if guard is not None:
                 cov = localizer.estimate().cov if source == "localizer" else None
-                # the sensor pose with no mount: the check scores the laser where it is
-                check = partial(guard.check, obs.scan, sensor, NO_MOUNT, cov)
+                check = partial(guard.for_updater, obs.scan, robot, mount, cov)
             report = updater.process(obs.scan, sensor, odometry=obs.odom, pose_check=check)
             counts["scans_processed"] += bool(report.processed)
             counts["scans_refused_by_pose_check"] += report.reason.startswith("pose unsure")
@@ -328,18 +329,21 @@ def _choose_source(asked: str, has: dict, log_path) -> str:
     return asked
 
 
-def _sensor_pose(obs: Observation, source: str, localizer, counts: dict) -> Pose2D | None:
-    """The laser's pose in the map frame: the robot pose composed with the mount, once."""
+def _robot_pose(obs: Observation, source: str, localizer, counts: dict
+                ) -> tuple[Pose2D, Pose2D] | None:
+    """(pose, mount): the robot's pose in the map frame and the laser's mount on it, whose
+    composition, made once, is the laser's pose; a log that gives the laser pose itself gives
+    it as the pose, with no mount."""
     if source == "recorded":
         if obs.sensor is not None:
-            return obs.sensor  # the log gives the laser pose itself: no mount to add
-        return None if obs.recorded is None else obs.recorded.compose(obs.mount)
+            return obs.sensor, NO_MOUNT
+        return None if obs.recorded is None else (obs.recorded, obs.mount)
     if source == "truth":
-        return None if obs.truth is None else obs.truth.compose(obs.mount)
+        return None if obs.truth is None else (obs.truth, obs.mount)
     if obs.odom is None or localizer is None:
         return None
     counts["localizer_updates"] += bool(localizer.update(obs.odom, obs.scan, obs.mount))
-    return localizer.estimate().pose_at(obs.odom).compose(obs.mount)
+    return localizer.estimate().pose_at(obs.odom), obs.mount
 
 
 def _start_localizer(grid, obs: Observation, config, initial_pose, initial_std, seed):

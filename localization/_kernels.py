@@ -36,6 +36,16 @@ def sample_motion_odometry(poses, delta, sigmas, noise):
 
 
 @njit(cache=True)
+def sensor_in_map(pose, mount):
+    """(x, y, cos, sin) of the sensor's pose in the map frame for a robot ``pose`` and the
+    sensor's ``mount`` in the robot frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    cm, sm = math.cos(mount[2]), math.sin(mount[2])
+    return (pose[0] + c * mount[0] - s * mount[1], pose[1] + s * mount[0] + c * mount[1],
+            c * cm - s * sm, s * cm + c * sm)
+
+
+@njit(cache=True)
 def likelihood_field(poses, mount, beams, table, frame, off_value, base, out):
     """Likelihood-field score of every particle: ``out[i] = base + sum_j table[cell of beam j's
     end point]`` (AMCL: base 1 and pz^3 per cell; or base 0 and log pz). ``beams`` (B, 2) are
@@ -44,12 +54,8 @@ def likelihood_field(poses, mount, beams, table, frame, off_value, base, out):
     precomputed beam vectors avoids any trigonometry per beam."""
     h, w = table.shape
     ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
-    cm, sm = math.cos(mount[2]), math.sin(mount[2])
     for i in range(poses.shape[0]):
-        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
-        sx = poses[i, 0] + c * mount[0] - s * mount[1]
-        sy = poses[i, 1] + s * mount[0] + c * mount[1]
-        cs, ss = c * cm - s * sm, s * cm + c * sm
+        sx, sy, cs, ss = sensor_in_map(poses[i], mount)
         p = base
         for j in range(beams.shape[0]):
             gx = (sx + cs * beams[j, 0] - ss * beams[j, 1] - ox) * inv_res
@@ -69,12 +75,8 @@ def interpolated_fit(poses, mount, beams, residual, frame, out):
     off the grid score 1."""
     h, w = residual.shape
     ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
-    cm, sm = math.cos(mount[2]), math.sin(mount[2])
     for i in range(poses.shape[0]):
-        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
-        sx = poses[i, 0] + c * mount[0] - s * mount[1]
-        sy = poses[i, 1] + s * mount[0] + c * mount[1]
-        cs, ss = c * cm - s * sm, s * cm + c * sm
+        sx, sy, cs, ss = sensor_in_map(poses[i], mount)
         total = 0.0
         for j in range(beams.shape[0]):
             gx = (sx + cs * beams[j, 0] - ss * beams[j, 1] - ox) * inv_res - 0.5

@@ -73,9 +73,8 @@ class PoseCheckConfig:
     max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
     max_yaw_std_deg: float = 5.0        # [deg]
     retry_interval: float = 0.3         # [s] of scan time a refusal holds without a new fit; 0: off
-    # ``PoseCheck.refine``: the pose the updater gets is the best fit near a trusted one, polished
-    # on a grid of +-polish_steps steps each way; a caller such as scenarios.session asks for
-    # it when ``refine`` is on
+    # ``for_updater`` hands the updater, for a trusted pose, the best fit near it (``refine``),
+    # polished on a grid of +-polish_steps steps of these sizes each way
     refine: bool = True
     polish_step: float = 0.005          # [m]
     polish_step_deg: float = 0.1        # [deg]
@@ -168,20 +167,16 @@ class PoseCheck:
         beams = select_beams(scan, self.config.max_beams)
         if beams.count == 0:
             return None
-        score = self._scores(robot_pose.as_array() + self._offsets, sensor_mount, beams)
+        from . import _kernels
+
+        score = np.empty(self._offsets.shape[0])
+        _kernels.likelihood_field(robot_pose.as_array() + self._offsets, sensor_mount.as_array(),
+                                  beams.points, self._table, self._frame, -1.0, 0.0, score)
+        score /= -beams.count
         best = int(np.argmin(score))
         dx, dy, dth = self._offsets[best]
         return PoseFit(float(score[0]), float(score[0] - score[best]),
                        Pose2D(float(dx), float(dy), float(dth)), beams.count)
-
-    def _scores(self, poses: np.ndarray, sensor_mount: Pose2D, beams) -> np.ndarray:
-        """The fit of every pose (N, 3), one kernel call."""
-        from . import _kernels
-
-        score = np.empty(poses.shape[0])
-        _kernels.likelihood_field(poses, sensor_mount.as_array(), beams.points, self._table,
-                                  self._frame, -1.0, 0.0, score)
-        return score / -beams.count
 
     def refine(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
                cov: np.ndarray | None = None) -> str | Pose2D:

@@ -265,8 +265,8 @@ def test_below_a_cell_of_error_walls_and_racks_keep_every_cell(w2):
     assert guarded.structure == 0 and guarded.freed <= 3 and guarded.holes == 0
     # With the pose check and its refinement (the runner's default) the updater gets the scan
     # matched to M near the wrong pose: nothing of G is freed and at most a stray cell or two
-    # changes wrongly (0 on the full route, benchmarks/RESULTS.md); without the refinement 0.5 deg flipped a few cells of a pallet's face where
-    # rays 9-10 m out run along it.
+    # changes wrongly (0 on the full route, benchmarks/RESULTS.md). Without the refinement
+    # 0.5 deg flipped a few cells of a pallet's face where rays 9-10 m out run along it.
     for error in (bench.Error("0.05 m", 0.05, 0.0), bench.Error("0.05 m", 0.0, -0.05),
                   bench.Error("0.5 deg", dtheta=math.radians(0.5))):
         d = _damage(w2, error, guarded=True)
@@ -293,11 +293,10 @@ def test_refine_refuses_what_the_check_refuses_and_keeps_its_hold():
     walls, ref = room()
     check = PoseCheck(ref)
     fits = _counted(check)
-    off = Pose2D(CENTRE.x + 0.1, CENTRE.y, CENTRE.theta)
-    verdicts = [check.refine(world.full_scan(walls, CENTRE, t), off, NO_MOUNT)
+    verdicts = [check.refine(world.full_scan(walls, CENTRE, t), OFF, NO_MOUNT)
                 for t in (0.0, 0.1, 0.2)]
-    assert verdicts == [UNSURE_FIT] * 3 and len(fits) == 1
     # a refusal holds: no new fit until retry_interval has passed
+    assert verdicts == [UNSURE_FIT] * 3 and len(fits) == 1
 
 
 def test_the_updater_uses_the_sensor_pose_the_check_returns():

@@ -60,7 +60,9 @@ class UpdaterConfig:
     # fill_gaps_clearance also gets a changed flag. The pairing distance D(r) otherwise hides
     # the gaps of a face that an earlier session mapped only in pieces (README, "fill_gaps").
     fill_gaps: bool = False
-    fill_gaps_clearance: float = 0.10        # [m] free square around the hit cell, each way
+    fill_gaps_clearance: float = 0.05        # [m] free square around the hit cell, each way
+    fill_gaps_free_margin: float = 0.075     # [m] free flags of agreeing beams this short of
+                                             # the hit, with fill_gaps (see steps)
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -82,6 +84,7 @@ class UpdaterConfig:
                      "window_deg", "pairing_distance_slope", "radius_near", "radius_far",
                      "removed_skip_fraction", "removed_skip_min", "last_check_max_area",
                      "cast_margin", "pairing_range_near", "fill_gaps_clearance",
+                     "fill_gaps_free_margin",
                      "seen_surface_radius"):
             _check_number(name, getattr(self, name), lambda v: v >= 0, "a number >= 0")
         for name in ("gate_fast_turn_deg_s", "max_range", "pairing_distance_near",

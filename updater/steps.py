@@ -168,7 +168,7 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
 
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
-def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray,
+def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: float,
                          cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> int:
     """Unchanged flags of the beams the classifier left UNCHANGED into ``ws.unchanged`` (each
     cell once).
@@ -181,10 +181,16 @@ def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray,
     collects its unchanged flags steadily, which is what protects walls against the stray
     changed flags of grazing beams. Unknown counts as occupied here, as everywhere in detection.
 
-    Free cells: every free cell on the beam up to ``free_fraction`` of its range.
-    Returns the count of cells flagged."""
+    Free cells: every free cell on the beam up to ``free_fraction`` of its range. With
+    ``cfg.fill_gaps``, up to ``fill_gaps_free_margin`` short of the hit where that reaches
+    further (beyond 3.75 m at the defaults): a free cell two cells in front of a face, which
+    noisy hits sometimes reach, then also gets the unchanged flags of the beams that pass it,
+    so ``fill_gaps`` draws it only from hits that land there consistently. Returns the count
+    of cells flagged."""
+    margin = cfg.fill_gaps_free_margin / res if cfg.fill_gaps else 0.0
     return kernels().flag_unchanged(ref, beams.hx, beams.hy, beams.verdict, sensor,
-                                    cfg.free_fraction, marks, ws.rows, ws.cols, ws.unchanged)
+                                    cfg.free_fraction, margin, marks, ws.rows, ws.cols,
+                                    ws.unchanged)
 
 
 # --- buffers and decision ---------------------------------------------------------------------

@@ -278,6 +278,27 @@ def test_fill_gaps_completes_a_partly_mapped_face_and_leaves_the_rest_alone():
     assert results[True][1] == 0 and results[True][2] == 0
 
 
+def test_fill_gaps_draws_a_face_that_m_has_three_cells_behind():
+    """M has the box 0.15 m further east than it stands: the world's west face pairs with M's
+    within D(r), so the method as written never draws it; ``fill_gaps`` draws most of it (at
+    0.1 m it does not: the rays grazing the face cross the free part of its cells)."""
+    walls = world.room_walls()
+    box = Rect(4.925, BOX.y0, 6.125, BOX.y1)         # the west face halfway through a cell
+    ref = world.rasterise(walls, hollow=[Rect(box.x0 + 0.15, box.y0, box.x1 + 0.15, box.y1)])
+    truth = world.rasterise(walls, hollow=[box])
+    west = (truth.data == OCCUPIED) & world.cells_of(Rect(box.x0, box.y0 + 0.1, box.x0 + 0.01,
+                                                          box.y1 - 0.1))
+    assert west.sum() == 13 and not (west & world.dilate(ref.data == OCCUPIED, 1)).any()
+    drawn = {}
+    for fill in (False, True):
+        updater, _, _ = drive(ref, walls + [box], UpdaterConfig(fill_gaps=fill))
+        out = updater.updated_map().data
+        drawn[fill] = int((west & world.dilate(out == OCCUPIED, 1)).sum())
+        new = (ref.data == FREE) & (out == OCCUPIED)
+        assert new[~world.dilate(world.cells_of(box), 1)].sum() == 0
+    assert drawn[False] == 0 and drawn[True] >= 10                  # measured: 0 and 11
+
+
 def test_fill_gaps_draws_nothing_beside_walls_from_noisy_poses():
     """A room that did not change, poses with 2 cm and 1 deg of noise: with ``fill_gaps`` no
     cell more than one cell from a wall becomes occupied and no wall cell is freed. What keeps

@@ -313,16 +313,15 @@ def ref_flag_changed(data, hx, hy, r, verdict, sensor, tpar, res):
     return cells, n_new
 
 
-def ref_flag_unchanged(data, hx, hy, verdict, sensor, free_fraction, free_margin=0.0):
+def ref_flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin=0.0):
     h, w = data.shape
     cells = []
     for i in range(len(hx)):
         if verdict[i] != K.UNCHANGED:
             continue
-        length = math.hypot(hx[i] - sensor[0], hy[i] - sensor[1])
         frac = free_fraction
-        if free_margin > 0 and length > free_margin:
-            frac = max(frac, 1 - free_margin / length)
+        if free_margin > 0 and r[i] > free_margin:
+            frac = max(frac, 1 - free_margin / r[i])
         r0, c0 = math.floor(hy[i]), math.floor(hx[i])
         for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
             rr, cc = r0 + dr, c0 + dc
@@ -362,15 +361,15 @@ def test_flag_changed_against_reference(seed):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
-@pytest.mark.parametrize("free_fraction, free_margin", [(0.98, 0.0), (0.9, 1.5)])
+@pytest.mark.parametrize("free_fraction, free_margin", [(0.98, 0.0), (0.9, 0.075)])
 def test_flag_unchanged_against_reference(seed, free_fraction, free_margin):
     data, sensor, r, hx, hy, verdict = _evaluator_input(seed)
     marks = np.zeros((data.size + 7) // 8, np.uint8)
     rows, cols = np.zeros(300, np.int64), np.zeros(300, np.int64)
     out = np.zeros(5000, np.int32)
-    n = K.flag_unchanged(data, hx, hy, verdict, sensor, free_fraction, free_margin, marks, rows,
-                         cols, out)
-    cells = ref_flag_unchanged(data, hx, hy, verdict, sensor, free_fraction, free_margin)
+    n = K.flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin, marks,
+                         rows, cols, out)
+    cells = ref_flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin)
     assert sorted(out[:n].tolist()) == sorted(cells) and n > 0
 
 

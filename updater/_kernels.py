@@ -7,8 +7,6 @@ are in metres and are divided by ``res`` here. Cells are addressed by their flat
 packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
 """
 
-import math
-
 import numpy as np
 from numba import njit
 
@@ -315,13 +313,13 @@ def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
 @njit(cache=True)
-def flag_unchanged(ref, hx, hy, verdict, sensor, free_fraction, free_margin, marks, rows, cols,
-                   out):
+def flag_unchanged(ref, hx, hy, r, verdict, sensor, free_fraction, free_margin, marks, rows,
+                   cols, out):
     """Unchanged flags of the UNCHANGED beams, each cell at most once (``marks``).
     Occupied: every occupied-or-unknown cell among the hit cell and its 4-neighbours.
-    Free: every free cell on the beam up to ``free_fraction`` of its range or, when
-    ``free_margin`` > 0, up to ``free_margin`` (grid units) short of the hit if that reaches
-    further. Returns the count."""
+    Free: every free cell on the beam up to ``free_fraction`` of its range ``r`` or, when
+    ``free_margin`` > 0, up to ``free_margin`` (same unit as ``r``) short of the hit if that
+    reaches further. Returns the count."""
     height, width = ref.shape
     n = 0
     for i in range(hx.shape[0]):
@@ -336,10 +334,8 @@ def flag_unchanged(ref, hx, hy, verdict, sensor, free_fraction, free_margin, mar
                     out[n] = row * width + col
                     n += 1
         frac = free_fraction
-        if free_margin > 0:
-            length = math.hypot(hx[i] - sensor[0], hy[i] - sensor[1])
-            if length > free_margin:
-                frac = max(frac, 1.0 - free_margin / length)
+        if 0 < free_margin < r[i]:
+            frac = max(frac, 1.0 - free_margin / r[i])
         n = walk_cells(ref, sensor[0], sensor[1], frac, hx[i], hy[i], False, False, marks,
                        rows, cols, out, n)
     return n

@@ -156,8 +156,8 @@ class MapUpdater:
                               **report)
         n_ch, n_new = steps.flag_changed_cells(self._ref, beams, sensor, self._res, cfg,
                                                self._ch_marks, self._enclosed, self._ws)
-        n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, self._res, cfg,
-                                          self._un_marks, self._ws)
+        n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, cfg, self._un_marks,
+                                          self._ws)
         hist, ref = self._hist.reshape(-1), self._ref.reshape(-1)
         n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks,
                                    self._ws)

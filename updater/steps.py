@@ -168,7 +168,7 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: f
 
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
-def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: float,
+def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray,
                          cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> int:
     """Unchanged flags of the beams the classifier left UNCHANGED into ``ws.unchanged`` (each
     cell once).
@@ -187,9 +187,9 @@ def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res:
     noisy hits sometimes reach, then also gets the unchanged flags of the beams that pass it,
     so ``fill_gaps`` draws it only from hits that land there consistently. Returns the count
     of cells flagged."""
-    margin = cfg.fill_gaps_free_margin / res if cfg.fill_gaps else 0.0
-    return kernels().flag_unchanged(ref, beams.hx, beams.hy, beams.verdict, sensor,
-                                    cfg.free_fraction, margin, marks, ws.rows, ws.cols,
+    margin = cfg.fill_gaps_free_margin if cfg.fill_gaps else 0.0
+    return kernels().flag_unchanged(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
+                                    sensor, cfg.free_fraction, margin, marks, ws.rows, ws.cols,
                                     ws.unchanged)
 
 

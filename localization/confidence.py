@@ -164,7 +164,10 @@ class PoseCheck:
         """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
         ``sensor_mount`` (robot frame), and the best pose of the search grids around it; None
         when the scan has no valid beam."""
-        beams = select_beams(scan, self.config.max_beams)
+        return self._fit(select_beams(scan, self.config.max_beams), robot_pose, sensor_mount)
+
+    def _fit(self, beams, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
+        """``fit`` with the scan's beams already selected."""
         if beams.count == 0:
             return None
         from . import _kernels
@@ -189,18 +192,18 @@ class PoseCheck:
         the odometry's drift since the last one, a few centimetres; faces the updater draws
         from such poses land a cell or two off and are then, being within the pairing
         distance of the truth, never corrected (README, "Choices")."""
-        reason, f = self._check(scan, robot_pose, sensor_mount, cov)
+        c = self.config
+        beams = select_beams(scan, c.max_beams)     # selected once for the check and the polish
+        reason, f = self._check(scan, robot_pose, sensor_mount, cov, beams)
         if reason:
             return reason
         if f is None:
             return robot_pose
-        c = self.config
         base = robot_pose.as_array()
         if not self._far(f.correction):
             base = base + f.correction.as_array()
         from . import _kernels
 
-        beams = select_beams(scan, c.max_beams)
         poses = base + self._polish
         score = np.empty(poses.shape[0])
         _kernels.interpolated_fit(poses, sensor_mount.as_array(), beams.points, self._residual,
@@ -225,12 +228,14 @@ class PoseCheck:
         (see the module docstring)."""
         return self._check(scan, robot_pose, sensor_mount, cov)[0]
 
-    def _check(self, scan, robot_pose, sensor_mount, cov) -> tuple[str, PoseFit | None]:
-        """(reason, the fit when one was made)."""
+    def _check(self, scan, robot_pose, sensor_mount, cov, beams=None
+               ) -> tuple[str, PoseFit | None]:
+        """(reason, the fit when one was made); ``beams``: the scan's selected beams, if
+        the caller has them."""
         t = float(scan.time)
         if not math.isfinite(t):           # no usable time: no hold either way
             self.reset()
-            return self._judge(scan, robot_pose, sensor_mount, cov)
+            return self._judge(scan, robot_pose, sensor_mount, cov, beams)
         if self._latest is not None and t < self._latest:
             self.reset()                   # time went back: a new stream
         self._latest = t
@@ -239,12 +244,12 @@ class PoseCheck:
             0.0 < t - self._refused_at < self.config.retry_interval - 1e-6
         if held:
             return self._refused_reason, None
-        reason, f = self._judge(scan, robot_pose, sensor_mount, cov)
+        reason, f = self._judge(scan, robot_pose, sensor_mount, cov, beams)
         self._refused_at, self._refused_reason = (t, reason) if reason else (None, "")
         return reason, f
 
     def _judge(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
-               cov: np.ndarray | None) -> tuple[str, PoseFit | None]:
+               cov: np.ndarray | None, beams=None) -> tuple[str, PoseFit | None]:
         c = self.config
         if cov is not None:
             cov = np.asarray(cov, np.float64)
@@ -252,7 +257,9 @@ class PoseCheck:
                     np.linalg.eigvalsh(cov[:2, :2]).max() > c.max_position_std ** 2 or \
                     cov[2, 2] > math.radians(c.max_yaw_std_deg) ** 2:
                 return UNSURE_COVARIANCE, None
-        f = self.fit(scan, robot_pose, sensor_mount)
+        if beams is None:
+            beams = select_beams(scan, c.max_beams)
+        f = self._fit(beams, robot_pose, sensor_mount)
         if f is None:
             return "", None
         return (UNSURE_FIT if f.gain > c.max_gain and self._far(f.correction) else ""), f

@@ -131,8 +131,8 @@ class MapUpdater:
                 self._counts["gated"] += 1
                 return ScanReport(t, False, reason, changed_cells=self._n_changed)
         sensor = steps.to_grid(sensor_pose, self._origin, self._res)
-        height, width = self._ref.shape
-        if not (0 <= sensor[0] < width and 0 <= sensor[1] < height):
+        width = self._ref.shape[1]
+        if not self._on_map(sensor):
             self._counts["skipped"] += 1
             return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
         verdict = pose_check() if pose_check is not None else ""
@@ -140,8 +140,7 @@ class MapUpdater:
             if not verdict.is_finite():
                 raise UpdaterError(f"pose_check returned a non-finite sensor pose {verdict}")
             sensor = steps.to_grid(verdict, self._origin, self._res)
-            verdict = "" if 0 <= sensor[0] < width and 0 <= sensor[1] < height else \
-                SKIPPED_OFF_MAP
+            verdict = "" if self._on_map(sensor) else SKIPPED_OFF_MAP
         if verdict:
             self._counts["skipped"] += 1
             return ScanReport(t, False, verdict, changed_cells=self._n_changed)
@@ -166,6 +165,10 @@ class MapUpdater:
             self._gate.mark_processed(t, gate_pose)
         return ScanReport(t, True, changed_flags=n_ch, new_obstacle_flags=n_new,
                           unchanged_flags=n_un, changed_cells=self._n_changed, **report)
+
+    def _on_map(self, sensor: np.ndarray) -> bool:
+        height, width = self._ref.shape
+        return 0 <= sensor[0] < width and 0 <= sensor[1] < height
 
     @staticmethod
     def _check_input(scan, sensor_pose, odometry):

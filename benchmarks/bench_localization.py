@@ -5,7 +5,7 @@
 Rows: the sensor update alone (likelihood field, all particles x 60 beams), a full filter update
 (odometry motion model, sensor update, cluster estimate, KLD resampling) at 2000 and 10 000
 particles, its parts, and filterpy's systematic resampler against the reimplementation used.
-The world is localization.synthetic's warehouse (5 cm map, 1081-beam lidar).
+The world is synthetic_warehouse's warehouse (5 cm map, 1081-beam lidar).
 """
 
 from __future__ import annotations
@@ -16,18 +16,22 @@ for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL
     os.environ[var] = "1"
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from gridmap import Pose2D  # noqa: E402
 from localization import LocalizerConfig, MonteCarloLocalizer  # noqa: E402
-from localization import synthetic as syn  # noqa: E402
 from localization.estimate import estimate  # noqa: E402
 from localization.motion import sample_motion  # noqa: E402
 from localization.resample import (filterpy_indices, kld_resample,  # noqa: E402
                                    resample_indices)
 from localization.sensor import likelihood_field, select_beams  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import synthetic_warehouse as syn  # noqa: E402  (the tests' synthetic warehouse)
 
 BARS = {"sensor update, 2000 particles x 60 beams": 2.0,
         "full update, 2000 particles": 4.0,

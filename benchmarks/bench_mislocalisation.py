@@ -34,7 +34,6 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -149,17 +148,15 @@ def injected_poses(true: np.ndarray, error: Error) -> np.ndarray:
 
 def replay(rec: Recording, poses: np.ndarray, guard=None, config=None) -> Damage:
     """Feed the recorded scans to a fresh updater on M1 at ``poses``; score the output."""
-    from scenarios import evaluation as ev
+    import evaluation as ev
+    from scenarios.pipeline import RobotPipeline
     from updater import MapUpdater
 
     upd = MapUpdater(rec.reference, config)
-    dmg = Damage()
+    pipeline = RobotPipeline(upd, pose_check=guard)
     for k, scan in enumerate(rec.scans):
-        pose = Pose2D(*poses[k])
-        check = None if guard is None else partial(guard.for_updater, scan, pose, rec.mount)
-        report = upd.process(scan, pose.compose(rec.mount), odometry=Pose2D(*rec.odom[k]),
-                             pose_check=check)
-        dmg.unsure += report.reason.startswith("pose unsure")
+        pipeline.step(scan, rec.mount, odometry=Pose2D(*rec.odom[k]), pose=Pose2D(*poses[k]))
+    dmg = Damage(unsure=pipeline.counts.scans_refused_by_pose_check)
     out = upd.updated_map()
     freed = (rec.truth.data == OCCUPIED) & (out.data == FREE) & (rec.reference.data != FREE)
     cd = ev.change_detection(rec.reference, out, rec.truth, np.ones(out.shape, bool))

@@ -249,7 +249,7 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = Tr
              updater_config=None) -> list[SessionRow]:
     """Play W1 then every update session, chaining the maps; one row per update session."""
     from gridmap import FREE, OCCUPIED
-    from scenarios import evaluation as ev
+    import evaluation as ev
     from scenarios import runner
     from scenarios.session import session_seeds
 

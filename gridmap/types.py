@@ -13,12 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import MapUpdatingError
+
 FREE = 0
 OCCUPIED = 100
 UNKNOWN = -1
 
 
-class GridError(ValueError):
+class GridError(MapUpdatingError, ValueError):
     """A grid, map file or grid argument that cannot be used; the message names the problem."""
 
 

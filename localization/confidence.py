@@ -38,7 +38,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from gridmap import OccupancyGrid, Pose2D, Scan
+from gridmap import OccupancyGrid, Pose2D, PoseVerdict, Scan
 from gridmap.distance import distance_to_occupied
 
 from .config import LocalizationError
@@ -73,7 +73,7 @@ class PoseCheckConfig:
     max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
     max_yaw_std_deg: float = 5.0        # [deg]
     retry_interval: float = 0.3         # [s] of scan time a refusal holds without a new fit; 0: off
-    # ``for_updater`` hands the updater, for a trusted pose, the best fit near it (``refine``),
+    # ``verdict`` hands the updater, for a trusted pose, the best fit near it (``refine``),
     # polished on a grid of +-polish_steps steps of these sizes each way
     refine: bool = True
     polish_step: float = 0.005          # [m]
@@ -211,15 +211,18 @@ class PoseCheck:
         x, y, th = poses[int(np.argmin(score))]
         return Pose2D(float(x), float(y), float(th))
 
-    def for_updater(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
-                    cov: np.ndarray | None = None) -> str | Pose2D:
-        """What ``updater.MapUpdater.process`` asks its ``pose_check``: a reason to skip the
-        scan, "" to trust the pose, or, with ``refine`` on, the sensor pose to use (the refined
-        robot pose composed with ``sensor_mount``)."""
+    def verdict(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+                cov: np.ndarray | None = None) -> PoseVerdict:
+        """What ``updater.MapUpdater.process`` asks its ``pose_check``: refused with the
+        reason, accepted, or, with ``refine`` on, refined to the sensor pose to use (the
+        refined robot pose composed with ``sensor_mount``)."""
         if not self.config.refine:
-            return self.check(scan, robot_pose, sensor_mount, cov)
-        verdict = self.refine(scan, robot_pose, sensor_mount, cov)
-        return verdict if isinstance(verdict, str) else verdict.compose(sensor_mount)
+            reason = self.check(scan, robot_pose, sensor_mount, cov)
+            return PoseVerdict.refused(reason) if reason else PoseVerdict.accepted()
+        better = self.refine(scan, robot_pose, sensor_mount, cov)
+        if isinstance(better, str):
+            return PoseVerdict.refused(better)
+        return PoseVerdict.refined(better.compose(sensor_mount))
 
     def check(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
               cov: np.ndarray | None = None) -> str:

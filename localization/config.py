@@ -10,9 +10,10 @@ import math
 from dataclasses import dataclass
 
 from gridmap.config import config_from_dict, config_from_yaml
+from gridmap.errors import MapUpdatingError
 
 
-class LocalizationError(ValueError):
+class LocalizationError(MapUpdatingError, ValueError):
     """A localiser argument, configuration or call that cannot be used; the message names it."""
 
 

@@ -1,4 +1,4 @@
-"""Scenario files, the session runner, evaluation, reports, the command line and the
+"""Scenario files, the robot pipeline, the session runner, the log replay, reports, the command line and the
 gymnasium environment: where the simulator, the localiser and the updater meet.
 
 Importing this package registers the environment ``WarehouseMapUpdate-v0`` with gymnasium
@@ -10,8 +10,8 @@ import sys
 
 from .catalog import DEFAULT_SCENARIO, ScenarioNotFound, builtin_scenarios, find_scenario
 
-_LAZY = {"evaluate": "policies", "EvaluationTable": "policies",
-         "RouteFollowingPolicy": "policies", "WarehouseMapUpdateEnv": "gym_env"}
+_LAZY = {"evaluate": "gym.policies", "EvaluationTable": "gym.policies",
+         "RouteFollowingPolicy": "gym.policies", "WarehouseMapUpdateEnv": "gym.env"}
 
 
 def __getattr__(name):
@@ -46,10 +46,10 @@ class _RegisterWhenImported:
 
 
 def _register_env() -> None:
-    if f"{__name__}.gym_env" in sys.modules:
+    if f"{__name__}.gym.env" in sys.modules:
         return      # the env module registers the environment at the end of its own import
     if "gymnasium" in sys.modules:
-        from .gym_env import register
+        from .gym.env import register
 
         register()
     elif not any(isinstance(f, _RegisterWhenImported) for f in sys.meta_path):

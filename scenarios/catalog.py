@@ -5,11 +5,13 @@ from __future__ import annotations
 import difflib
 from pathlib import Path
 
+from gridmap import MapUpdatingError
+
 HERE = Path(__file__).resolve().parent
 DEFAULT_SCENARIO = "aws_small_warehouse"
 
 
-class ScenarioNotFound(FileNotFoundError):
+class ScenarioNotFound(MapUpdatingError, FileNotFoundError):
     """A scenario name or path that names no file."""
 
 

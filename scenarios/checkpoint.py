@@ -29,10 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from gridmap import MapUpdatingError
+
 FORMAT = 1
 
 
-class ResumeError(ValueError):
+class ResumeError(MapUpdatingError, ValueError):
     """A run folder that cannot be resumed, or options that contradict it; names the file."""
 
 

@@ -42,7 +42,7 @@ def _cmd_run(args) -> int:
 
     observers = []
     if args.bag is not None:
-        from .logs.session_bags import SessionBagRecorder
+        from .session_bags import SessionBagRecorder
 
         observers.append(SessionBagRecorder(args.bag, args.bag_format))
     recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
@@ -76,7 +76,7 @@ def _rerun_recorder(args):
 
 
 def _cmd_update(args) -> int:
-    from .logs.replay import update_from_log
+    from .replay import update_from_log
 
     summary = update_from_log(args.map, args.log, args.out, args.state,
                               pose_source=args.poses, updater_config=args.config,
@@ -159,17 +159,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
-    """The documented errors of every package: reported in one line, never a traceback."""
-    errors: list[type[BaseException]] = [FileNotFoundError, PermissionError, IsADirectoryError]
-    for module, name in (("gridmap", "GridError"), ("sim", "ScenarioError"),
-                         ("updater", "UpdaterError"), ("localization", "LocalizationError"),
-                         ("scenarios.catalog", "ScenarioNotFound"),
-                         ("scenarios.checkpoint", "ResumeError"),
-                         ("scenarios.logs", "LogError")):
-        mod = sys.modules.get(module)
-        if mod is not None and hasattr(mod, name):
-            errors.append(getattr(mod, name))
-    return tuple(errors)
+    """The errors a user's input or machine can cause: reported in one line, never a
+    traceback. Every package's own error derives from ``MapUpdatingError``."""
+    from gridmap import MapUpdatingError
+
+    return (MapUpdatingError, FileNotFoundError, PermissionError, IsADirectoryError)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -48,7 +48,7 @@ import rerun.blueprint as rrb
 
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
 
-from . import evaluation as ev
+import evaluation as ev
 from .topview import CELL_COLORS, UNCLASSIFIED, VERDICT_COLORS, scan_points
 
 MAP_PERIOD = 1.0          # [s] of simulated time between two logs of the maps at most

@@ -11,15 +11,13 @@ from __future__ import annotations
 
 import math
 import resource
-import time
 from dataclasses import dataclass, field
-from functools import partial
 
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
 
-from . import evaluation as ev
+import evaluation as ev
 
 # The robot starts each session at its dock, whose pose is known to about this precision.
 START_STD = (0.05, 0.05, 0.02)  # x [m], y [m], yaw [rad]
@@ -120,6 +118,8 @@ class UpdateSession:
         from localization.confidence import PoseCheck
         from updater import MapUpdater
 
+        from .pipeline import RobotPipeline
+
         self.scenario, self.index, self.world = scenario, session, world
         self.name = scenario.sessions[session].name
         self.reference, self.initial = reference, initial
@@ -135,18 +135,17 @@ class UpdateSession:
         if localizer_config is None:
             localizer_config = localizer_config_for(scenario)
         self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
-        self.localizer_initial = MonteCarloLocalizer(initial, localizer_config,
-                                                     seed=localizer_seed)
         self.localizer.initialize(start, cov)
-        self.localizer_initial.initialize(start, cov)
         self.updater = MapUpdater(reference, updater_config)
-        self.guard = PoseCheck(reference, pose_check_config) if pose_check else None
+        guard = PoseCheck(reference, pose_check_config) if pose_check else None
+        self.pipeline = RobotPipeline(self.updater, self.localizer, guard)
+        # the comparison of the evaluation: the same localiser on M1, feeding no updater
+        initial_localizer = MonteCarloLocalizer(initial, localizer_config, seed=localizer_seed)
+        initial_localizer.initialize(start, cov)
+        self.pipeline_initial = RobotPipeline(localizer=initial_localizer)
         self.counter = ev.ObservationCounter(self.frame)
         self.people_mask = np.zeros(self.frame.shape, bool)
         self.trajectory = Trajectory()
-        self.cpu = {"localizer_s": 0.0, "localizer_initial_map_s": 0.0, "updater_s": 0.0}
-        self.counts = {"scans": 0, "scans_processed": 0, "scans_dropped_as_lost": 0,
-                       "scans_refused_by_pose_check": 0, "localizer_updates": 0}
         self.last_report = None
         self.last_scan = None
         self.last_estimate: Pose2D | None = None
@@ -161,28 +160,10 @@ class UpdateSession:
         """One ``sim.ScanMsg``, handled while the world is at the message's time; returns the
         updater's report."""
         world, mount = self.world, self.mounts[msg.lidar]
-        t0 = time.process_time()
-        self.counts["localizer_updates"] += bool(self.localizer.update(msg.odom_pose, msg.scan,
-                                                                       mount))
-        est = self.localizer.estimate().pose_at(msg.odom_pose)
-        t1 = time.process_time()
-        self.localizer_initial.update(msg.odom_pose, msg.scan, mount)
-        est_init = self.localizer_initial.estimate().pose_at(msg.odom_pose)
-        t2 = time.process_time()
-        # asked by the updater only for scans that pass its gate
-        check = None if self.guard is None else partial(
-            self.guard.for_updater, msg.scan, est, mount, self.localizer.estimate().cov)
-        report = self.updater.process(msg.scan, est.compose(mount), odometry=msg.odom_pose,
-                                      pose_check=check)
-        t3 = time.process_time()
-        self.cpu["localizer_s"] += t1 - t0
-        self.cpu["localizer_initial_map_s"] += t2 - t1
-        self.cpu["updater_s"] += t3 - t2
-        self.counts["scans"] += 1
-        self.counts["scans_dropped_as_lost"] += bool(report.dropped_as_lost)
-        self.counts["scans_refused_by_pose_check"] += report.reason.startswith("pose unsure")
+        step = self.pipeline.step(msg.scan, mount, odometry=msg.odom_pose)
+        est, report = step.robot_pose, step.report
+        est_init = self.pipeline_initial.step(msg.scan, mount, odometry=msg.odom_pose).robot_pose
         if report.processed:
-            self.counts["scans_processed"] += 1
             clean = world.scan_without_people(msg.true_pose, msg.lidar)
             self.counter.add_scan(msg.true_pose.compose(mount), clean.ranges, clean.angles())
             self._stale = self._stale or not report.dropped_as_lost
@@ -203,6 +184,15 @@ class UpdateSession:
         self._tally = ChangeTally(n_correct, int(np.count_nonzero(changed)) - n_correct)
         self._stale = False
 
+    @property
+    def counts(self) -> dict:
+        """The pipeline's counters, as ``metrics.json`` keeps them."""
+        c = self.pipeline.counts
+        return {"scans": c.scans, "scans_processed": c.scans_processed,
+                "scans_dropped_as_lost": c.scans_dropped_as_lost,
+                "scans_refused_by_pose_check": c.scans_refused_by_pose_check,
+                "localizer_updates": c.localizer_updates}
+
     # --- now --------------------------------------------------------------------------------------
     @property
     def updated_map(self) -> OccupancyGrid:
@@ -218,7 +208,7 @@ class UpdateSession:
 
     def estimate(self) -> Pose2D:
         """The localiser's pose of the robot at the latest odometry."""
-        if not self.counts["scans"]:      # no odometry recorded yet: the initial pose holds
+        if not self.pipeline.counts.scans:  # no odometry recorded yet: the initial pose holds
             return self.localizer.estimate().pose
         return self.localizer.estimate().pose_at(self.world.odom_pose)
 
@@ -251,9 +241,9 @@ class UpdateSession:
                                                   arr["true"][:, :2]),
             },
             "resources": {
-                "updater_cpu_s": self.cpu["updater_s"],
-                "localizer_cpu_s": self.cpu["localizer_s"],
-                "localizer_initial_map_cpu_s": self.cpu["localizer_initial_map_s"],
+                "updater_cpu_s": self.pipeline.cpu["updater_s"],
+                "localizer_cpu_s": self.pipeline.cpu["localizer_s"],
+                "localizer_initial_map_cpu_s": self.pipeline_initial.cpu["localizer_s"],
                 "updater_state_bytes": int(self.updater.state_bytes()),
                 "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                 "simulated_s": float(arr["time"][-1]) if len(arr["time"]) else 0.0,

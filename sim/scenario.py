@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import Pose2D
+from gridmap import MapUpdatingError, Pose2D
 
 
-class ScenarioError(ValueError):
+class ScenarioError(MapUpdatingError, ValueError):
     """A scenario file that cannot be used; the message names the file and the key or object."""
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
-from scenarios import evaluation as ev
+import evaluation as ev
 
 F, O, U = FREE, OCCUPIED, UNKNOWN
 

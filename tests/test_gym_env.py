@@ -13,8 +13,8 @@ from gymnasium.utils.env_checker import check_env
 
 import scenarios
 import sim
-from scenarios.episode import StepOutcome, default_reward, initial_map
-from scenarios.policies import RouteFollowingPolicy, evaluate, run_episode
+from scenarios.gym.episode import StepOutcome, default_reward, initial_map
+from scenarios.gym.policies import RouteFollowingPolicy, evaluate, run_episode
 from scenarios.runner import RunOptions, build_initial_map, run_update_session
 from scenarios.session import session_seeds
 from tiny_room import tiny_room

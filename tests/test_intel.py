@@ -14,8 +14,8 @@ import pytest
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, load_map, save_map
 from gridmap.mapping import build_map
 from gridmap.metrics import cross_correlation, opdf
-from scenarios.logs.carmen import read_carmen
-from scenarios.logs.replay import update_from_log
+from robotlogs.carmen import read_carmen
+from scenarios.replay import update_from_log
 
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 RES = 0.05

@@ -39,7 +39,7 @@ def test_command_line_starts_without_compiling_kernels():
     assert out.stdout.strip() == "False"
 
 
-@pytest.mark.parametrize("front_end, module", [("gymnasium", "scenarios/gym_env.py"),
+@pytest.mark.parametrize("front_end, module", [("gymnasium", "scenarios/gym/env.py"),
                                                ("rerun", "scenarios/rerun_log.py")])
 def test_each_optional_front_end_is_imported_by_one_module_only(front_end, module):
     root = pathlib.Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The localiser in a synthetic warehouse (localization.synthetic): scans ray-cast in a fine
+"""The localiser in a synthetic warehouse (synthetic_warehouse): scans ray-cast in a fine
 solid world, a 5 cm SLAM-like map, odometry corrupted with the odometry motion model using the
 simulator's noise (alpha1..4 = 0.05, 0.01, 0.05, 0.01)."""
 
@@ -9,7 +9,7 @@ import pytest
 
 from gridmap import FREE, OccupancyGrid, Pose2D
 from localization import LocalizationError, LocalizerConfig, MonteCarloLocalizer
-from localization import synthetic as syn
+import synthetic_warehouse as syn
 
 ODOM_NOISE = (0.05, 0.01, 0.05, 0.01)
 START_COV = np.diag([0.1 ** 2, 0.1 ** 2, 0.05 ** 2])

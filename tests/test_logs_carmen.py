@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from gridmap import Pose2D
-from scenarios.logs.carmen import parse_carmen, read_carmen
-from scenarios.logs.records import LogError, OdomRecord, PoseRecord, ScanRecord
+from robotlogs.carmen import parse_carmen, read_carmen
+from robotlogs.records import LogError, OdomRecord, PoseRecord, ScanRecord
 
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 

@@ -9,9 +9,10 @@ import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan, load_map, save_map
 from gridmap.raycast import cast_rays
-from scenarios.logs.records import LogError, OdomRecord, PoseRecord, ScanRecord, TransformRecord
-from scenarios.logs.replay import detect_format, update_from_log
-from scenarios.logs.rosbag import write_bag
+from robotlogs import detect_format
+from robotlogs.records import LogError, OdomRecord, PoseRecord, ScanRecord, TransformRecord
+from robotlogs.rosbag import write_bag
+from scenarios.replay import update_from_log
 from updater import MapUpdater, UpdaterConfig
 
 RES = 0.05
@@ -212,7 +213,7 @@ def test_carmen_log_replay(world, tmp_path):
                         world[0] / "map.yaml", log, tmp_path / "c.yaml",
                         updater_config=NO_GATING, progress=False)
     assert s["pose_source"] == "recorded" and s["scans_used"] == len(steps)
-    from scenarios.logs.carmen import read_carmen
+    from robotlogs.carmen import read_carmen
 
     upd = MapUpdater(room([REMOVED]), NO_GATING)
     for rec in read_carmen(log).scans():

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from gridmap import Pose2D, Scan
-from scenarios.logs.records import (LogError, OdomRecord, PoseRecord, ReadStats, ScanRecord,
+from robotlogs.records import (LogError, OdomRecord, PoseRecord, ReadStats, ScanRecord,
                                     TransformRecord)
-from scenarios.logs.rosbag import BagWriter, bag_topics, read_bag, resolve_topics, scan_count, \
+from robotlogs.rosbag import BagWriter, bag_topics, read_bag, resolve_topics, scan_count, \
     write_bag
 
 

@@ -108,7 +108,7 @@ def test_quick_routes_keep_every_change_in_view(quick_run):
     """Each change of each update session leaves cells that the quick route observes in at
     least T processed scans and that the previous map gets wrong: something to update."""
     import sim
-    from scenarios import evaluation as ev
+    import evaluation as ev
     from scenarios.catalog import find_scenario
 
     scn = sim.quick_variant(sim.load_scenario(find_scenario(None)))

@@ -20,19 +20,19 @@ from gridmap import map_io
 from gridmap.mapping import LogOddsMapper
 from localization import MonteCarloLocalizer
 from localization.confidence import PoseCheck
-from scenarios.logs.carmen import parse_carmen
-from scenarios.logs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
-from scenarios.logs.replay import update_from_log
-from scenarios.logs.rosbag import BagWriter, read_bag, write_bag
+from robotlogs.carmen import parse_carmen
+from robotlogs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
+from scenarios.replay import update_from_log
+from robotlogs.rosbag import BagWriter, read_bag, write_bag
 from updater import MapUpdater, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK
 
 try:
     import test_sim_scenario as scenario_tests
-    import test_updater_world as world
+    import synthetic_room as world
 except ImportError:  # tests collected as a package
     from tests import test_sim_scenario as scenario_tests
-    from tests import test_updater_world as world
+    from tests import synthetic_room as world
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 BAD = {"nan": np.nan, "-inf": -np.inf, "negative": -1.0, "beyond range": 1e9}

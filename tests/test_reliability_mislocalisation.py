@@ -13,19 +13,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gridmap import Pose2D, Scan
+from gridmap import Pose2D, PoseVerdict, Scan
 from localization import LocalizationError
 from localization.confidence import (UNSURE_COVARIANCE, UNSURE_FIT, PoseCheck, PoseCheckConfig,
                                      search_grid)
-from updater import MapUpdater, UpdaterConfig, UpdaterError
+from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_mislocalisation as bench  # noqa: E402
 
 try:
-    import test_updater_world as world
+    import synthetic_room as world
 except ImportError:  # tests collected as a package
-    from tests import test_updater_world as world
+    from tests import synthetic_room as world
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
@@ -180,8 +180,9 @@ def test_in_the_updater_a_refused_pose_is_scored_once_per_retry_interval():
     for k in range(20):                                       # 2 s at 10 Hz, 0.05 m per scan
         scan = world.full_scan(walls + [BOX], CENTRE, 0.1 * k)
         r = u.process(scan, OFF, odometry=Pose2D(0.05 * k, 0.0, 0.0),
-                      pose_check=partial(check.check, scan, OFF, NO_MOUNT))
+                      pose_check=partial(check.verdict, scan, OFF, NO_MOUNT))
         reasons.append(r.reason)
+        assert r.status is ScanStatus.REFUSED
     # the gate never advances past a refused scan, so every scan reaches the check; one in
     # three is scored (0.0, 0.3, 0.6, ... s) and every one of them is refused and counted
     assert reasons == [UNSURE_FIT] * 20 and len(fits) == 7
@@ -192,7 +193,7 @@ def test_in_the_updater_a_refused_pose_is_scored_once_per_retry_interval():
 def test_updater_asks_the_check_only_after_the_gate_and_a_refusal_changes_nothing():
     walls, ref = room()
     calls = []
-    answer = ["pose unsure: test"]
+    answer = [PoseVerdict.refused("pose unsure: test")]
 
     def check():
         calls.append(1)
@@ -205,7 +206,7 @@ def test_updater_asks_the_check_only_after_the_gate_and_a_refusal_changes_nothin
     assert [r.reason for r in reports] == ["pose unsure: test"] * 6 and len(calls) == 6
     assert u.stats["skipped"] == 6 and u.stats["processed"] == 0
     assert not u.change_counts().any()
-    answer[0] = ""
+    answer[0] = PoseVerdict.accepted()
     r = u.process(world.full_scan(walls + [BOX], CENTRE, 0.6), CENTRE, odometry=odom[6],
                   pose_check=check)
     assert r.processed and len(calls) == 7
@@ -307,15 +308,18 @@ def test_the_updater_uses_the_sensor_pose_the_check_returns():
     wrong = Pose2D(CENTRE.x + 0.3, CENTRE.y - 0.2, CENTRE.theta + 0.1)
     for k, scan in enumerate(scans):
         a = plain.process(scan, CENTRE, odometry=odom[k])
-        b = told.process(scan, wrong, odometry=odom[k], pose_check=lambda: CENTRE)
+        b = told.process(scan, wrong, odometry=odom[k], pose_check=lambda: PoseVerdict.refined(CENTRE))
         assert b.processed and (a.changed_flags, a.unchanged_flags) == \
             (b.changed_flags, b.unchanged_flags)
     assert plain.change_counts().sum() > 0
     assert np.array_equal(plain.change_counts(), told.change_counts())
     later = world.full_scan(walls + [BOX], CENTRE, 5.0)
     off_map = told.process(later, CENTRE, odometry=Pose2D(9.0, 0.0, 0.0),
-                           pose_check=lambda: Pose2D(-50.0, 0.0, 0.0))
-    assert not off_map.processed and off_map.reason == "sensor off the map"
+                           pose_check=lambda: PoseVerdict.refined(Pose2D(-50.0, 0.0, 0.0)))
+    assert not off_map.processed and off_map.status is ScanStatus.OFF_MAP
     with pytest.raises(UpdaterError, match="non-finite"):
         told.process(world.full_scan(walls + [BOX], CENTRE, 6.0), CENTRE,
-                     odometry=Pose2D(12.0, 0.0, 0.0), pose_check=lambda: Pose2D(math.nan, 0, 0))
+                     odometry=Pose2D(12.0, 0.0, 0.0), pose_check=lambda: PoseVerdict.refined(Pose2D(math.nan, 0, 0)))
+    with pytest.raises(UpdaterError, match="must return a gridmap.PoseVerdict"):
+        told.process(world.full_scan(walls + [BOX], CENTRE, 6.0), CENTRE,
+                     odometry=Pose2D(12.0, 0.0, 0.0), pose_check=lambda: "")

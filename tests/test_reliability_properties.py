@@ -17,8 +17,8 @@ from gridmap import (FREE, OCCUPIED, UNKNOWN, GridError, MapFileError, Occupancy
                      load_map, save_map)
 from gridmap.metrics import compare_maps, opdf_one_way
 from gridmap.raycast import cast_rays
-from scenarios.logs.carmen import IGNORED, parse_carmen, read_carmen
-from scenarios.logs.records import LogError
+from robotlogs.carmen import IGNORED, parse_carmen, read_carmen
+from robotlogs.records import LogError
 
 SETTINGS = dict(derandomize=True, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

@@ -6,9 +6,9 @@ import pytest
 
 from gridmap import load_map
 from scenarios.cli import main
-from scenarios.logs.replay import update_from_log
-from scenarios.logs.rosbag import bag_topics
-from scenarios.logs.session_bags import SessionBagRecorder
+from scenarios.replay import update_from_log
+from robotlogs.rosbag import bag_topics
+from scenarios.session_bags import SessionBagRecorder
 from scenarios.observers import Observers
 from scenarios.runner import RunOptions, run_scenario
 

@@ -16,9 +16,9 @@ from updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, Ma
 from updater.gating import GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TIME_BACK, Gate
 
 try:
-    import test_updater_world as world
+    import synthetic_room as world
 except ImportError:  # tests collected as a package
-    from tests import test_updater_world as world
+    from tests import synthetic_room as world
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 

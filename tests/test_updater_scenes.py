@@ -14,9 +14,9 @@ from gridmap.raycast import traverse
 from updater import MapUpdater, UpdaterConfig
 
 try:
-    import test_updater_world as world
+    import synthetic_room as world
 except ImportError:  # tests collected as a package
-    from tests import test_updater_world as world
+    from tests import synthetic_room as world
 
 Circle, Drive, Rect = world.Circle, world.Drive, world.Rect
 

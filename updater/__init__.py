@@ -10,7 +10,7 @@ Imports nothing of this project but ``gridmap``; numba is imported on first use.
 
 from .config import UpdaterConfig, UpdaterError
 from .map_updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, MapUpdater,
-                          ScanReport)
+                          ScanReport, ScanStatus)
 
-__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "BEAM_INVALID",
+__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "ScanStatus", "BEAM_INVALID",
            "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]

@@ -10,9 +10,10 @@ import math
 from dataclasses import asdict, dataclass
 
 from gridmap.config import config_from_dict, config_from_yaml
+from gridmap.errors import MapUpdatingError
 
 
-class UpdaterError(ValueError):
+class UpdaterError(MapUpdatingError, ValueError):
     """An updater argument, configuration, state file or call that cannot be used; the message
     names the key, file or value."""
 

@@ -18,12 +18,14 @@ zeroing a map-sized array.
 
 Bad input: NaN, inf, negative and zero ranges are invalid beams. A non-finite sensor pose,
 odometry pose or scan time raises ``UpdaterError`` before anything is changed. A sensor pose
-off the map is a counted skip (``ScanReport.reason == "sensor off the map"``), and so is a pose
-the caller's ``pose_check`` does not trust (e.g. ``localization.confidence.PoseCheck``).
+off the map is a counted skip (``ScanReport.status is ScanStatus.OFF_MAP``), and so is a pose
+the caller's ``pose_check`` refuses (``ScanStatus.REFUSED``; e.g.
+``localization.confidence.PoseCheck``).
 """
 
 from __future__ import annotations
 
+import enum
 import json
 import math
 import os
@@ -34,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import GridError, OccupancyGrid, Pose2D, Scan
+from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
@@ -49,13 +51,23 @@ BEAM_CHANGE = 3       # detected change kept by the run filter: changed flags
 STATE_FORMAT = 1
 
 
+class ScanStatus(enum.Enum):
+    """What became of a scan given to ``MapUpdater.process``."""
+
+    PROCESSED = "processed"   # classified, flagged, pushed and decided
+    LOST = "lost"             # classified, then dropped by the lost check: no flags
+    GATED = "gated"           # not processed: the gate (``ScanReport.reason`` says which rule)
+    OFF_MAP = "off map"       # not processed: the sensor pose lies off the map
+    REFUSED = "refused"       # not processed: the pose check refused the pose
+
+
 @dataclass(frozen=True, eq=False)
 class ScanReport:
     """What one call of ``MapUpdater.process`` did."""
 
     time: float                    # [s] the scan's time
-    processed: bool                # classified; False: gated or skipped, see ``reason``
-    reason: str = ""               # why not processed: gating.GATED_*, off the map, pose check
+    status: ScanStatus
+    reason: str = ""               # for people: the gate's rule, or the pose check's reason
     valid_beams: int = 0
     detected_changes: int = 0      # beams kept as detected changes by the run filter
     raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
@@ -63,12 +75,22 @@ class ScanReport:
     new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
     unchanged_flags: int = 0       # cells that got an unchanged flag
     changed_cells: int = 0         # cells whose state differs from M, after this scan
-    dropped_as_lost: bool = False  # classified, but too many changes: no flags added
     verdicts: np.ndarray | None = None   # BEAM_* per beam, None when not classified
+
+    @property
+    def processed(self) -> bool:
+        """Classified (then flagged, or dropped as lost)."""
+        return self.status in (ScanStatus.PROCESSED, ScanStatus.LOST)
+
+    @property
+    def dropped_as_lost(self) -> bool:
+        return self.status is ScanStatus.LOST
 
     def summary(self) -> dict:
         """The report without the per-beam verdicts, as plain values."""
-        return {k: v for k, v in vars(self).items() if k != "verdicts"}
+        out = {k: v for k, v in vars(self).items() if k != "verdicts"}
+        out["status"] = self.status.value
+        return out
 
 
 class MapUpdater:
@@ -111,15 +133,15 @@ class MapUpdater:
 
     # --- the per-scan call --------------------------------------------------------------------
     def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None,
-                pose_check: Callable[[], str] | None = None) -> ScanReport:
+                pose_check: Callable[[], PoseVerdict] | None = None) -> ScanReport:
         """Gate, classify, flag, push and decide for one scan. See the module docstring for
         bad input.
 
         ``pose_check``, when given, is asked only for scans that pass the gate (so a costly
-        check runs a few times per metre, not at the scan rate): it returns "" when the pose
-        can be trusted, else a reason, and the scan is then a counted skip that, like a lost
-        scan, does not advance the gate. It may also return a ``Pose2D``: the pose is trusted
-        and that sensor pose (e.g. ``sensor_pose`` matched to M) is used instead."""
+        check runs a few times per metre, not at the scan rate) and returns a
+        ``gridmap.PoseVerdict``: accepted (the pose is used as given), refined (that sensor
+        pose, e.g. ``sensor_pose`` matched to M, is used instead) or refused (the scan is a
+        counted skip that, like a lost scan, does not advance the gate)."""
         self._check_input(scan, sensor_pose, odometry)
         cfg = self.config
         self._counts["scans"] += 1
@@ -129,21 +151,28 @@ class MapUpdater:
             reason = self._gate.check(t, gate_pose, odometry is not None)
             if reason:
                 self._counts["gated"] += 1
-                return ScanReport(t, False, reason, changed_cells=self._n_changed)
+                return ScanReport(t, ScanStatus.GATED, reason, changed_cells=self._n_changed)
         sensor = steps.to_grid(sensor_pose, self._origin, self._res)
         width = self._ref.shape[1]
+        verdict = PoseVerdict.accepted()
+        if pose_check is not None and self._on_map(sensor):
+            verdict = pose_check()
+            if not isinstance(verdict, PoseVerdict):
+                raise UpdaterError(f"pose_check must return a gridmap.PoseVerdict, got "
+                                   f"{type(verdict).__name__}")
+            if verdict.verdict is Verdict.REFINED:
+                if not verdict.sensor_pose.is_finite():
+                    raise UpdaterError(f"pose_check returned a non-finite sensor pose "
+                                       f"{verdict.sensor_pose}")
+                sensor = steps.to_grid(verdict.sensor_pose, self._origin, self._res)
         if not self._on_map(sensor):
             self._counts["skipped"] += 1
-            return ScanReport(t, False, SKIPPED_OFF_MAP, changed_cells=self._n_changed)
-        verdict = pose_check() if pose_check is not None else ""
-        if isinstance(verdict, Pose2D):         # trusted, and a better sensor pose to use
-            if not verdict.is_finite():
-                raise UpdaterError(f"pose_check returned a non-finite sensor pose {verdict}")
-            sensor = steps.to_grid(verdict, self._origin, self._res)
-            verdict = "" if self._on_map(sensor) else SKIPPED_OFF_MAP
-        if verdict:
+            return ScanReport(t, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP,
+                              changed_cells=self._n_changed)
+        if verdict.is_refused:
             self._counts["skipped"] += 1
-            return ScanReport(t, False, verdict, changed_cells=self._n_changed)
+            return ScanReport(t, ScanStatus.REFUSED, verdict.reason,
+                              changed_cells=self._n_changed)
 
         beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
         self._counts["processed"] += 1
@@ -151,8 +180,7 @@ class MapUpdater:
                       raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
         if steps.is_lost(beams, cfg):
             self._counts["lost"] += 1
-            return ScanReport(t, True, changed_cells=self._n_changed, dropped_as_lost=True,
-                              **report)
+            return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
         n_ch, n_new = steps.flag_changed_cells(self._ref, beams, sensor, self._res, cfg,
                                                self._ch_marks, self._enclosed, self._ws)
         n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, cfg, self._un_marks,
@@ -163,7 +191,7 @@ class MapUpdater:
         self._n_changed += steps.decide(hist, ref, self._decided, n_moved, width, cfg, self._ws)
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
-        return ScanReport(t, True, changed_flags=n_ch, new_obstacle_flags=n_new,
+        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch, new_obstacle_flags=n_new,
                           unchanged_flags=n_un, changed_cells=self._n_changed, **report)
 
     def _on_map(self, sensor: np.ndarray) -> bool:

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from gridmap import OccupancyGrid, Pose2D
 
 from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
-from .session import UpdateSession, session_seeds
+from ..session import UpdateSession, session_seeds
 
 ENV_ID = "WarehouseMapUpdate-v0"
 PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE = 0, 205, 254   # map_server's trinary image values
@@ -251,7 +251,7 @@ class WarehouseMapUpdateEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from .topview import scan_points, top_view
+        from ..topview import scan_points, top_view
 
         session, world = self.session, self.world
         if session is None:
@@ -312,7 +312,7 @@ class WarehouseMapUpdateEnv(gym.Env):
 def _load_scenario(scenario, quick: bool):
     import sim
 
-    from .catalog import find_scenario
+    from ..catalog import find_scenario
 
     scn = scenario if isinstance(scenario, sim.Scenario) else \
         sim.load_scenario(find_scenario(scenario))
@@ -333,7 +333,7 @@ def _load_grid(value, name: str) -> OccupancyGrid | None:
 def register() -> None:
     """Register ``WarehouseMapUpdate-v0`` with gymnasium (once)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="scenarios.gym_env:WarehouseMapUpdateEnv")
+        gym.register(id=ENV_ID, entry_point="scenarios.gym.env:WarehouseMapUpdateEnv")
 
 
 register()

@@ -11,13 +11,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gridmap import Pose2D, Scan
+from gridmap import MapUpdatingError, Pose2D, Scan
 
 # How many problem messages a reader keeps verbatim; the rest are only counted.
 MAX_PROBLEMS = 20
 
 
-class LogError(ValueError):
+class LogError(MapUpdatingError, ValueError):
     """A log that cannot be read or used; the message names the file, line or topic."""
 
 

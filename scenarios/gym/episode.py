@@ -12,8 +12,8 @@ import numpy as np
 
 from gridmap import OccupancyGrid, Pose2D
 
-from .runner import build_initial_map
-from .session import session_seeds
+from ..runner import build_initial_map
+from ..session import session_seeds
 
 
 @functools.lru_cache(maxsize=8)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .gym_env import WarehouseMapUpdateEnv
+from .env import WarehouseMapUpdateEnv
 
 
 class RouteFollowingPolicy:

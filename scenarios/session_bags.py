@@ -13,8 +13,8 @@ from pathlib import Path
 
 from gridmap import Pose2D
 
-from .records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
-from .rosbag import BagWriter
+from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
+from robotlogs.rosbag import BagWriter
 
 
 def lidar_frame(index: int) -> str:

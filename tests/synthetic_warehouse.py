@@ -18,7 +18,7 @@ import numpy as np
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan, wrap_angle
 from gridmap.raycast import cast_rays
 
-from .motion import motion_sigmas, odometry_delta
+from localization.motion import motion_sigmas, odometry_delta
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,110 @@
+"""The robot's per-scan software, once: localiser -> pose check -> lidar mount -> updater ->
+counters. The simulated session, the log replay, the gymnasium environment and the live ROS
+node all drive this one class; they only turn their inputs (a simulator message, a log record,
+a ROS message) into ``step`` calls and its answer into their outputs.
+
+    pipeline = RobotPipeline(updater=MapUpdater(m), localizer=loc, pose_check=PoseCheck(m))
+    step = pipeline.step(scan, mount, odometry=odom)     # once per scan
+    step.report.status, step.robot_pose, pipeline.counts.scans_processed
+
+Where the robot's pose comes from: the localiser when the pipeline has one (it is updated with
+the scan and its estimate is carried to the scan's odometry, the map -> odom convention of
+ROS), else the pose the caller gives (a recorded localisation, the truth). The pose check's
+answer is a typed ``gridmap.PoseVerdict`` and the updater's a ``ScanReport`` with a
+``ScanStatus``; the counters read those, never a text.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from functools import partial
+
+from gridmap import Pose2D, Scan
+
+
+@dataclass
+class PipelineCounts:
+    """What the pipeline did with the scans it was given."""
+
+    scans: int = 0                        # given to ``step``
+    scans_without_pose: int = 0           # no pose to place them at (no localiser, none given)
+    scans_processed: int = 0              # classified by the updater (lost ones included)
+    scans_dropped_as_lost: int = 0        # classified, then dropped by the lost check
+    scans_refused_by_pose_check: int = 0  # the pose check refused their pose
+    localizer_updates: int = 0            # scans the localiser ran a filter update on
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One ``step``: the robot pose the scan was placed at (map frame, before any refinement by
+    the pose check; None when there was none) and the updater's report (None without an updater
+    or a pose)."""
+
+    robot_pose: Pose2D | None
+    report: object | None     # updater.ScanReport
+
+
+class RobotPipeline:
+    """Localiser (optional), pose check (optional), mount and updater (optional) of one robot
+    on one reference map.
+
+    ``updater``: an ``updater.MapUpdater`` (None: localisation only, as the runner's second
+    localiser on M1). ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
+    (None: poses come with each scan; it may be set later, once a start is known).
+    ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
+    ``cpu`` holds the process time spent in the localiser and in the updater (pose check
+    included) [s].
+    """
+
+    def __init__(self, updater=None, localizer=None, pose_check=None):
+        self.updater = updater
+        self.localizer = localizer
+        self.pose_check = pose_check
+        self.counts = PipelineCounts()
+        self.cpu = {"localizer_s": 0.0, "updater_s": 0.0}
+
+    def step(self, scan: Scan, mount: Pose2D, odometry: Pose2D | None = None,
+             pose: Pose2D | None = None) -> Step:
+        """Place one scan and hand it to the updater. ``mount``: the lidar on the robot (base
+        frame); ``odometry``: the robot's odom-frame pose at the scan's time (the localiser's
+        motion input and the updater's gate); ``pose``: the robot's map-frame pose, used only
+        when the pipeline has no localiser."""
+        self.counts.scans += 1
+        robot, cov = self._locate(scan, mount, odometry, pose)
+        if robot is None:
+            self.counts.scans_without_pose += 1
+            return Step(None, None)
+        if self.updater is None:
+            return Step(robot, None)
+        t0 = time.process_time()
+        check = None if self.pose_check is None else partial(
+            self.pose_check.verdict, scan, robot, mount, cov)
+        report = self.updater.process(scan, robot.compose(mount), odometry=odometry,
+                                      pose_check=check)
+        self.cpu["updater_s"] += time.process_time() - t0
+        self._count(report)
+        return Step(robot, report)
+
+    def _locate(self, scan, mount, odometry, pose):
+        """(robot pose in the map frame, its covariance or None)."""
+        if self.localizer is None:
+            return pose, None
+        if odometry is None:
+            return None, None
+        t0 = time.process_time()
+        self.counts.localizer_updates += bool(self.localizer.update(odometry, scan, mount))
+        est = self.localizer.estimate()
+        self.cpu["localizer_s"] += time.process_time() - t0
+        return est.pose_at(odometry), est.cov
+
+    def _count(self, report) -> None:
+        from updater import ScanStatus
+
+        c = self.counts
+        c.scans_processed += report.processed
+        c.scans_dropped_as_lost += report.status is ScanStatus.LOST
+        c.scans_refused_by_pose_check += report.status is ScanStatus.REFUSED

@@ -5,6 +5,10 @@ Per scan: the LaserScan, the odometry (``/odom`` and ``odom -> base_link``), the
 ``map -> odom`` and ``/amcl_pose``, and the simulator's true pose on ``/ground_truth/pose``;
 each lidar's mount once on ``/tf_static``. One bag per update session:
 ``DIR/<session>.bag`` (ROS 1) or ``DIR/<session>/`` (ROS 2).
+
+Stamps are the session's time plus ``BAG_EPOCH``, a fixed date (2023-11-14): ROS 1 reads a
+stamp of 0 as "the latest" in tf lookups, so a clock that starts at 0 cannot be replayed to a
+live node.
 """
 
 from __future__ import annotations
@@ -15,6 +19,8 @@ from gridmap import Pose2D
 
 from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
+
+BAG_EPOCH = 1_700_000_000.0   # [s] the bags' clock at the session's start
 
 
 def lidar_frame(index: int) -> str:
@@ -42,12 +48,12 @@ class SessionBagRecorder:
         self._bag = BagWriter(path, self.fmt).__enter__()
         self.paths[name] = path
         self._bag.write_transforms([
-            TransformRecord(0.0, "base_link", lidar_frame(i), lidar.mount, static=True)
+            TransformRecord(BAG_EPOCH, "base_link", lidar_frame(i), lidar.mount, static=True)
             for i, lidar in enumerate(scenario.robot.lidars)])
 
     def scan(self, msg, estimate: Pose2D, report, world, updater, localizer) -> None:
         est = localizer.estimate()
-        t = msg.time
+        t = BAG_EPOCH + msg.time
         bag = self._bag
         bag.write(OdomRecord(t, msg.odom_pose))
         bag.write_transforms([TransformRecord(t, "map", "odom", est.map_to_odom()),

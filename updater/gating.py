@@ -27,6 +27,11 @@ GATED_FAST_TURN = "fast turn"    # idle after a fast turn
 GATED_TIME_BACK = "time went backwards"   # the gate restarts from this scan
 SKIPPED_OFF_MAP = "sensor off the map"    # not gating: the scan cannot be classified
 
+# [s] Scan times are floats: 10 Hz stamps such as 0.7 - 0.4 come out 0.29999999999999993, and
+# stamps carried from a ROS clock (1.7e9 s) are rounded to 0.24 us. Intervals are compared with
+# this much tolerance, so that the same scans pass whatever the clock's offset.
+TIME_TOLERANCE = 1e-6
+
 _FIELDS = ("source", "last_t", "last_x", "last_y", "last_th", "proc_t", "proc_x", "proc_y",
            "proc_th", "idle", "idle_t", "travel")
 
@@ -88,12 +93,12 @@ class Gate:
     def _reason(self, t, pose):
         cfg = self.config
         if self.idle:
-            rested = t - self.idle_t >= cfg.gate_recovery_time
+            rested = t - self.idle_t >= cfg.gate_recovery_time - TIME_TOLERANCE
             if rested and self.travel >= cfg.gate_recovery_distance:
                 self.idle = False
             else:
                 return GATED_FAST_TURN
-        if t - self.proc_t < cfg.gate_min_interval:
+        if t - self.proc_t < cfg.gate_min_interval - TIME_TOLERANCE:
             return GATED_INTERVAL
         moved = math.hypot(pose.x - self.proc_x, pose.y - self.proc_y) >= cfg.gate_min_distance
         turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))

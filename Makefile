@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test test-all bench setup clean readme-tables
+.PHONY: run test test-all bench setup ros1 clean readme-tables
 
 $(BIN)/mapupdate: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -13,13 +13,17 @@ $(BIN)/mapupdate: pyproject.toml
 
 setup: $(BIN)/mapupdate
 
+# ROS 1 from Debian for the live node's tests (skipped, with the reason, where it cannot be had)
+ros1: setup
+	@sh ros/install-ros1.sh $(BIN)/python
+
 run: setup
 	$(BIN)/mapupdate run $(ARGS)
 
-test: setup
+test: setup ros1
 	$(BIN)/python -m pytest -q -m "not slow" $(ARGS)
 
-test-all: setup
+test-all: setup ros1
 	$(BIN)/python -m pytest -q $(ARGS)
 
 bench: setup

@@ -182,25 +182,28 @@ def _wanted(topics: BagTopics, kinds) -> dict[str, str]:
 
 def _records(msg, msgtype: str, topic: str, kind: str) -> Iterator[Record]:
     if kind == "scan":
-        yield _scan_record(msg, topic)
+        yield scan_record(msg, topic)
     elif kind == "odom":
-        yield OdomRecord(_stamp(msg.header), _pose(msg.pose.pose), _twist(msg.twist.twist),
+        yield OdomRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), _twist(msg.twist.twist),
                          msg.header.frame_id, msg.child_frame_id, topic)
     elif kind in ("pose", "truth"):
         yield _pose_record(msg, msgtype, topic)
     else:
         for tr in msg.transforms:
-            yield TransformRecord(_stamp(tr.header), tr.header.frame_id.lstrip("/"),
-                                  tr.child_frame_id.lstrip("/"), _transform(tr.transform),
+            yield TransformRecord(stamp_seconds(tr.header), tr.header.frame_id.lstrip("/"),
+                                  tr.child_frame_id.lstrip("/"), transform_pose(tr.transform),
                                   static=kind == "tf_static")
 
 
-def _scan_record(msg, topic: str) -> ScanRecord:
+def scan_record(msg, topic: str) -> ScanRecord:
+    """A ``sensor_msgs/LaserScan`` as a record: the same conversion for a bag's messages
+    (rosbags) and a live node's (rospy). Raises ``LogError`` for a message that cannot be a
+    scan (bad angles or range limits, a beam count that does not reach angle_max)."""
     ranges = np.array(msg.ranges, dtype=np.float32)
     # ROS: readings beyond range_max (and +inf) mean nothing was hit within range.
     with np.errstate(invalid="ignore"):
         ranges[ranges >= msg.range_max] = np.inf
-    t = _stamp(msg.header)
+    t = stamp_seconds(msg.header)
     try:
         scan = Scan(ranges, float(msg.angle_min), float(msg.angle_increment),
                     float(msg.range_min), float(msg.range_max), t)
@@ -221,16 +224,20 @@ def _pose_record(msg, msgtype: str, topic: str) -> PoseRecord:
     if msgtype == POSE_COV:
         cov = np.asarray(msg.pose.covariance, np.float64).reshape(6, 6)[np.ix_(COV_INDEX,
                                                                                 COV_INDEX)]
-        return PoseRecord(_stamp(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id,
+        return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id,
                           cov)
     if msgtype == ODOMETRY:
-        return PoseRecord(_stamp(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id)
-    return PoseRecord(_stamp(msg.header), _pose(msg.pose), topic, msg.header.frame_id)
+        return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id)
+    return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose), topic, msg.header.frame_id)
 
 
-def _stamp(header) -> float:
-    # Integer nanoseconds divided once: a time written by ``_ns`` reads back bit for bit.
-    return (int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)) / 1e9
+def stamp_seconds(header) -> float:
+    """A header's stamp [s]: ROS 2's ``sec``/``nanosec`` (rosbags reads ROS 1 bags so too) or
+    rospy's ``secs``/``nsecs``. Integer nanoseconds divided once: a time written by ``_ns``
+    reads back bit for bit, whoever reads it."""
+    st = header.stamp
+    sec, nsec = (st.sec, st.nanosec) if hasattr(st, "nanosec") else (st.secs, st.nsecs)
+    return (int(sec) * 1_000_000_000 + int(nsec)) / 1e9
 
 
 def _yaw(q) -> float:
@@ -241,7 +248,8 @@ def _pose(p) -> Pose2D:
     return Pose2D(float(p.position.x), float(p.position.y), _yaw(p.orientation))
 
 
-def _transform(tr) -> Pose2D:
+def transform_pose(tr) -> Pose2D:
+    """A ``geometry_msgs/Transform`` as a 2D pose (x, y and the yaw of its rotation)."""
     return Pose2D(float(tr.translation.x), float(tr.translation.y), _yaw(tr.rotation))
 
 

@@ -91,6 +91,13 @@ def _cmd_update(args) -> int:
     return 0
 
 
+def _cmd_ros1(args) -> int:
+    from .ros1.node import run_node
+
+    # an empty --config (a launch file's unset argument) means none
+    return run_node(args.map, args.config or None, args.ros_argv)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mapupdate",
@@ -150,6 +157,17 @@ def build_parser() -> argparse.ArgumentParser:
                           "covariance) calls unsure (default: off; README, 'Choices')")
     upd.set_defaults(func=_cmd_update)
 
+    ros = sub.add_parser("ros1", help="run the live ROS 1 node (under a roscore)",
+                         description="The map updater as a ROS 1 node: LaserScan and tf in, "
+                         "map_updated out; ROS remappings (name:=value) are passed to ROS.")
+    ros.add_argument("--map", type=Path, default=None,
+                     help="map_server YAML of the reference map (default: the latched 'map' "
+                          "topic)")
+    ros.add_argument("--config", default=None,
+                     help="YAML with 'updater' and 'pose_check' sections; private ROS "
+                          "parameters (~updater/threshold, ...) override it")
+    ros.set_defaults(func=_cmd_ros1)
+
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
     ren.add_argument("scenario", nargs="?", default=None)
     ren.add_argument("--session", default="W1", help="session name or index (default W1)")
@@ -167,7 +185,10 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    full = sys.argv if argv is None else ["mapupdate", *argv]
+    # ROS remappings and private parameters (``__name:=x``, ``_rate:=5``) are ROS's, not ours
+    args = build_parser().parse_args([a for a in full[1:] if ":=" not in a])
+    args.ros_argv = full
     try:
         return args.func(args)
     except KeyboardInterrupt:

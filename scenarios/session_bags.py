@@ -6,9 +6,10 @@ Per scan: the LaserScan, the odometry (``/odom`` and ``odom -> base_link``), the
 each lidar's mount once on ``/tf_static``. One bag per update session:
 ``DIR/<session>.bag`` (ROS 1) or ``DIR/<session>/`` (ROS 2).
 
-Stamps are the session's time plus ``BAG_EPOCH``, a fixed date (2023-11-14): ROS 1 reads a
-stamp of 0 as "the latest" in tf lookups, so a clock that starts at 0 cannot be replayed to a
-live node.
+Stamps are the session's time from a fixed date: session i starts ``i`` days after
+``BAG_EPOCH`` (2023-11-14), as sessions of a warehouse would. ROS 1 reads a stamp of 0 as "the
+latest" in tf lookups, so a clock that starts at 0 cannot be replayed to a live node, and
+sessions that all started at one time would look to a running node like time going back.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from gridmap import Pose2D
 from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
 
-BAG_EPOCH = 1_700_000_000.0   # [s] the bags' clock at the session's start
+BAG_EPOCH = 1_700_000_000.0   # [s] the bags' clock at the start of session 0
+DAY = 86_400.0
 
 
 def lidar_frame(index: int) -> str:
@@ -45,15 +47,16 @@ class SessionBagRecorder:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         name = scenario.sessions[session].name
         path = self.out_dir / (f"{name}.bag" if self.fmt == "ros1" else name)
+        self._start = BAG_EPOCH + DAY * session     # [s] this session's clock at 0
         self._bag = BagWriter(path, self.fmt).__enter__()
         self.paths[name] = path
         self._bag.write_transforms([
-            TransformRecord(BAG_EPOCH, "base_link", lidar_frame(i), lidar.mount, static=True)
+            TransformRecord(self._start, "base_link", lidar_frame(i), lidar.mount, static=True)
             for i, lidar in enumerate(scenario.robot.lidars)])
 
     def scan(self, msg, estimate: Pose2D, report, world, updater, localizer) -> None:
         est = localizer.estimate()
-        t = BAG_EPOCH + msg.time
+        t = self._start + msg.time
         bag = self._bag
         bag.write(OdomRecord(t, msg.odom_pose))
         bag.write_transforms([TransformRecord(t, "map", "odom", est.map_to_odom()),

@@ -64,9 +64,10 @@ def test_replay_with_this_projects_localiser_stays_close(bag_run, tmp_path):
 def test_bag_clock_starts_at_a_realistic_epoch_not_at_zero(bag_run):
     # ROS 1 reads a stamp of 0 as "the latest" in tf lookups
     from robotlogs.rosbag import read_bag
-    from scenarios.session_bags import BAG_EPOCH
+    from scenarios.session_bags import BAG_EPOCH, DAY
 
     _, ros1, _ = bag_run
     times = [r.time for r in read_bag(ros1.paths["W2"], kinds=("scan", "tf"))]
-    assert BAG_EPOCH == 1.7e9 and BAG_EPOCH <= min(times) < BAG_EPOCH + 1.0
+    start = BAG_EPOCH + DAY          # W2 is session 1: a day after the epoch
+    assert BAG_EPOCH == 1.7e9 and start <= min(times) < start + 1.0
     assert max(times) - min(times) > 10.0

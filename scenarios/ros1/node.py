@@ -1,0 +1,361 @@
+"""The live ROS 1 node: the one robot pipeline fed by LaserScan messages and tf, publishing the
+updated map. The only module of the project that imports rospy.
+
+Subscribes: LaserScan on ``~scan_topics`` (default ``scan``), tf (``map -> odom -> base``, as
+amcl or gmapping publish it, and ``base -> laser``), and the latched ``map`` when no ``--map``
+is given. Publishes: ``map_updated`` (nav_msgs/OccupancyGrid, latched) every
+``~publish_period`` seconds when it changed, ``map_updated_updates``
+(map_msgs/OccupancyGridUpdate: the box of cells that changed since the last publication, what
+costmap_2d's static layer reads with ``subscribe_to_updates``), and the node's health on
+``/diagnostics``. Services (std_srvs/Trigger): ``~save``, ``~commit``, ``~reset``.
+
+Scans are queued by the subscriber and processed in order by one worker thread, so a slow
+scan never blocks ROS's callbacks; past ``~queue_size`` waiting scans the oldest is dropped
+and counted. Malformed traffic (an empty scan, bad angles, a frame without a transform, a scan
+older than the tf buffer, a map of another resolution) is counted by kind and skipped.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import MapUpdatingError, OccupancyGrid, Pose2D
+
+from .grids import changed_box, grid_from_message, message_fields
+from .settings import NodeSettings, node_settings
+
+ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
+                "python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs "
+                "python3-map-msgs")
+
+
+def _ros():
+    try:
+        import rospy
+        import tf2_ros
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from map_msgs.msg import OccupancyGridUpdate
+        from nav_msgs.msg import OccupancyGrid as GridMsg
+        from sensor_msgs.msg import LaserScan
+        from std_srvs.srv import Trigger, TriggerResponse
+    except ImportError as e:
+        raise MapUpdatingError(f"mapupdate ros1 needs ROS 1's Python packages ({e}); on "
+                               f"Debian 12: apt-get install {ROS_PACKAGES}") from None
+    return {"rospy": rospy, "tf2_ros": tf2_ros, "DiagnosticArray": DiagnosticArray,
+            "DiagnosticStatus": DiagnosticStatus, "KeyValue": KeyValue,
+            "OccupancyGridUpdate": OccupancyGridUpdate, "GridMsg": GridMsg,
+            "LaserScan": LaserScan, "Trigger": Trigger, "TriggerResponse": TriggerResponse}
+
+
+class Health:
+    """Counters and per-scan times, for /diagnostics and the log."""
+
+    def __init__(self):
+        self.counts = collections.Counter()
+        self.skipped = collections.Counter()     # why scans or maps were not used
+        self.times: collections.deque = collections.deque(maxlen=500)   # [s] per scan
+
+    def values(self, pipeline_counts: dict) -> list[tuple[str, str]]:
+        t = np.asarray(self.times) * 1e3
+        out = [(k, str(v)) for k, v in sorted(self.counts.items())]
+        out += [(k, str(v)) for k, v in pipeline_counts.items()]
+        out += [(f"skipped: {k}", str(v)) for k, v in sorted(self.skipped.items())]
+        if t.size:
+            out += [("scan_time_ms_mean", f"{t.mean():.3f}"), ("scan_time_ms_max",
+                                                              f"{t.max():.3f}")]
+        return out
+
+
+class MapUpdaterNode:
+    """The node: call ``start()`` after ``rospy.init_node``, then ``rospy.spin()``."""
+
+    def __init__(self, settings: NodeSettings, updater_config, pose_check_config,
+                 reference: OccupancyGrid | None = None):
+        self.ros = _ros()
+        self.settings, self.updater_config = settings, updater_config
+        self.pose_check_config = pose_check_config
+        self.health = Health()
+        self.pipeline = None
+        self._lock = threading.Lock()            # the pipeline, the published map
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Condition()
+        self._published: np.ndarray | None = None
+        self._mounts: dict[str, Pose2D] = {}
+        if reference is not None:
+            self._adopt(reference)
+
+    # --- the map ------------------------------------------------------------------------------
+    def _adopt(self, reference: OccupancyGrid) -> None:
+        """Start afresh on ``reference``: new buffers, a new pose check (lock held or not
+        needed)."""
+        from localization.confidence import PoseCheck
+        from updater import MapUpdater
+
+        from ..pipeline import RobotPipeline
+
+        check = PoseCheck(reference, self.pose_check_config) \
+            if self.settings.use_pose_check else None
+        self.pipeline = RobotPipeline(MapUpdater(reference, self.updater_config),
+                                      pose_check=check)
+        self._published = None                   # publish the new map at the next period
+
+    def _on_map(self, msg) -> None:
+        try:
+            grid = grid_from_message(msg)
+        except MapUpdatingError as e:
+            self._skip("map message unusable", e)
+            return
+        with self._lock:
+            if self.pipeline is not None:
+                ref = self.pipeline.updater.reference_map
+                if not ref.same_frame(grid):
+                    self._skip("map of another size, resolution or origin",
+                               f"{grid.shape} at {grid.resolution} m, origin {grid.origin}; "
+                               f"the reference has {ref.shape} at {ref.resolution} m")
+                    return
+                if np.array_equal(ref.data, grid.data):
+                    return                       # the same map again (a latched re-send)
+            self._adopt(grid)
+            self.health.counts["maps_received"] += 1
+
+    # --- scans --------------------------------------------------------------------------------
+    def _on_scan(self, msg, topic: str) -> None:
+        with self._wake:
+            self.health.counts["scans_received"] += 1
+            if len(self._queue) >= self.settings.queue_size:
+                self._queue.popleft()
+                self.health.counts["scans_dropped_behind"] += 1
+            self._queue.append((msg, topic))
+            self._wake.notify()
+
+    def _work(self) -> None:
+        rospy = self.ros["rospy"]
+        while not rospy.is_shutdown():
+            with self._wake:
+                while not self._queue and not rospy.is_shutdown():
+                    self._wake.wait(0.1)
+                if not self._queue:
+                    continue
+                msg, topic = self._queue.popleft()
+            t0 = time.perf_counter()
+            self._handle(msg, topic)
+            self.health.times.append(time.perf_counter() - t0)
+
+    def _handle(self, msg, topic: str) -> None:
+        from robotlogs.rosbag import scan_record
+
+        try:
+            rec = scan_record(msg, topic)
+        except MapUpdatingError as e:
+            return self._skip("malformed scan", e)
+        if rec.scan.beams == 0:
+            return self._skip("empty scan", topic)
+        with np.errstate(invalid="ignore"):
+            bad = int(np.count_nonzero(~(rec.scan.ranges >= 0)))   # NaN and negative
+        if bad:
+            self.health.counts["scans_with_bad_ranges"] += 1   # those beams are invalid
+        if self.pipeline is None:
+            return self._skip("no reference map yet", topic)
+        poses = self._poses(msg.header.stamp, rec.frame_id or self.settings.base_frame)
+        if poses is None:
+            return
+        robot, odom, mount = poses
+        with self._lock:
+            self.pipeline.step(rec.scan, mount, odometry=odom, pose=robot)
+            self.health.counts["scans_used"] += 1
+
+    def _poses(self, stamp, laser_frame: str):
+        """(robot in map, robot in odom, laser on robot) at ``stamp``; None, counted, when tf
+        cannot give them. map -> base is composed from map -> odom and odom -> base, as the
+        log replay composes them."""
+        tf2 = self.ros["tf2_ros"]
+        s = self.settings
+        try:
+            map_odom = self._lookup(s.map_frame, s.odom_frame, stamp)
+            odom = self._lookup(s.odom_frame, s.base_frame, stamp)
+            mount = self._mount(laser_frame)
+        except tf2.ExtrapolationException as e:
+            past = "past" in str(e)
+            return self._skip("scan older than the tf buffer" if past
+                              else "no transform at the scan's time", e)
+        except tf2.TransformException as e:
+            return self._skip("no transform for the scan's frames", e)
+        return map_odom.compose(odom), odom, mount
+
+    def _lookup(self, parent: str, child: str, stamp) -> Pose2D:
+        from robotlogs.rosbag import transform_pose
+
+        rospy = self.ros["rospy"]
+        ts = self.tf.lookup_transform(parent, child, stamp,
+                                      rospy.Duration(self.settings.tf_timeout))
+        return transform_pose(ts.transform)
+
+    def _mount(self, laser_frame: str) -> Pose2D:
+        if laser_frame == self.settings.base_frame:
+            return Pose2D(0.0, 0.0, 0.0)
+        if laser_frame not in self._mounts:      # a laser's mount is static: looked up once
+            self._mounts[laser_frame] = self._lookup(self.settings.base_frame, laser_frame,
+                                                     self.ros["rospy"].Time(0))
+        return self._mounts[laser_frame]
+
+    def _skip(self, why: str, detail) -> None:
+        self.health.skipped[why] += 1
+        if self.health.skipped[why] == 1:        # the first of each kind, then only counted
+            self.ros["rospy"].logwarn(f"map_updater: {why} ({detail}); further ones counted "
+                                      "on /diagnostics")
+        return None
+
+    # --- output -------------------------------------------------------------------------------
+    def _publish(self, _event=None) -> None:
+        with self._lock:
+            if self.pipeline is None:
+                self._diagnostics({})
+                return
+            grid = self.pipeline.updater.updated_map()
+            before, self._published = self._published, grid.data
+            counts = self.pipeline.counts.as_dict()
+        if before is None or not np.array_equal(before, grid.data):
+            self.map_pub.publish(self._grid_msg(grid))
+            box = None if before is None else changed_box(before, grid.data)
+            if box is not None:
+                self.update_pub.publish(self._update_msg(grid, box))
+            self.health.counts["maps_published"] += 1
+        self._diagnostics(counts)
+
+    def _header(self):
+        r = self.ros
+        h = r["GridMsg"]().header
+        h.stamp, h.frame_id = r["rospy"].Time.now(), self.settings.map_frame
+        return h
+
+    def _grid_msg(self, grid: OccupancyGrid):
+        f = message_fields(grid)
+        msg = self.ros["GridMsg"]()
+        msg.header = self._header()
+        info = msg.info
+        info.map_load_time = msg.header.stamp
+        info.resolution, info.width, info.height = f["resolution"], f["width"], f["height"]
+        info.origin.position.x, info.origin.position.y = f["origin"]
+        info.origin.orientation.w = 1.0
+        msg.data = f["data"]
+        return msg
+
+    def _update_msg(self, grid: OccupancyGrid, box):
+        x, y, w, h = box
+        msg = self.ros["OccupancyGridUpdate"]()
+        msg.header = self._header()
+        msg.x, msg.y, msg.width, msg.height = x, y, w, h
+        msg.data = grid.data[y:y + h, x:x + w].reshape(-1).tolist()
+        return msg
+
+    def _diagnostics(self, counts: dict) -> None:
+        r = self.ros
+        status = r["DiagnosticStatus"]()
+        status.name = f"{r['rospy'].get_name()}: health"
+        status.hardware_id = self.settings.map_frame
+        worrying = self.health.counts["scans_dropped_behind"] or sum(self.health.skipped.values())
+        status.level = status.WARN if worrying else status.OK
+        status.message = "scans dropped or skipped" if worrying else "ok"
+        status.values = [r["KeyValue"](k, v) for k, v in self.health.values(counts)]
+        array = r["DiagnosticArray"]()
+        array.header.stamp = r["rospy"].Time.now()
+        array.status = [status]
+        self.diag_pub.publish(array)
+
+    # --- services -----------------------------------------------------------------------------
+    def _save(self, _req):
+        from gridmap import save_map
+
+        with self._lock:
+            if self.pipeline is None:
+                return self.ros["TriggerResponse"](False, "no reference map yet")
+            grid = self.pipeline.updater.updated_map()
+        try:
+            save_map(grid, Path(self.settings.save_path))    # written to a temporary file
+        except (MapUpdatingError, OSError) as e:
+            return self.ros["TriggerResponse"](False, f"cannot save: {e}")
+        return self.ros["TriggerResponse"](True, f"saved {self.settings.save_path}")
+
+    def _commit(self, _req):
+        with self._lock:
+            if self.pipeline is None:
+                return self.ros["TriggerResponse"](False, "no reference map yet")
+            self._adopt(self.pipeline.updater.updated_map())
+        self._publish()
+        return self.ros["TriggerResponse"](True, "the updated map is the reference now")
+
+    def _reset(self, _req):
+        with self._lock:
+            if self.pipeline is None:
+                return self.ros["TriggerResponse"](False, "no reference map yet")
+            self._adopt(self.pipeline.updater.reference_map)
+        self._publish()
+        return self.ros["TriggerResponse"](True, "buffers cleared; the reference is unchanged")
+
+    # --- wiring -------------------------------------------------------------------------------
+    def start(self, subscribe_map: bool) -> None:
+        r, s = self.ros, self.settings
+        rospy, tf2 = r["rospy"], r["tf2_ros"]
+        self.tf = tf2.Buffer(rospy.Duration(10.0))
+        self._listener = tf2.TransformListener(self.tf)
+        self.map_pub = rospy.Publisher("map_updated", r["GridMsg"], queue_size=1, latch=True)
+        self.update_pub = rospy.Publisher("map_updated_updates", r["OccupancyGridUpdate"],
+                                          queue_size=10)
+        self.diag_pub = rospy.Publisher("/diagnostics", r["DiagnosticArray"], queue_size=10)
+        for name, handler in (("~save", self._save), ("~commit", self._commit),
+                              ("~reset", self._reset)):
+            rospy.Service(name, r["Trigger"], handler)
+        if subscribe_map:
+            rospy.Subscriber(s.map_topic, r["GridMsg"], self._on_map, queue_size=1)
+        for topic in s.scan_topics:
+            rospy.Subscriber(topic, r["LaserScan"], self._on_scan, callback_args=topic,
+                             queue_size=s.queue_size)
+        threading.Thread(target=self._work, name="map_updater_worker", daemon=True).start()
+        rospy.Timer(rospy.Duration(s.publish_period), self._publish)
+        rospy.on_shutdown(self._log_summary)
+
+    def _log_summary(self) -> None:
+        counts = self.pipeline.counts.as_dict() if self.pipeline is not None else {}
+        text = ", ".join(f"{k} {v}" for k, v in self.health.values(counts))
+        self.ros["rospy"].loginfo(f"map_updater: {text}")
+
+
+def run_node(map_path=None, config_path=None, argv=None) -> int:
+    """``mapupdate ros1``: init the node, read its parameters, run until shut down."""
+    from gridmap import load_map
+
+    r = _ros()
+    rospy = r["rospy"]
+    base = _config_sections(config_path) if config_path is not None else {}
+    reference = load_map(map_path) if map_path is not None else None
+    rospy.init_node("map_updater", argv=argv)
+    settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
+    node = MapUpdaterNode(settings, updater_config, pose_check_config, reference)
+    node.start(subscribe_map=reference is None)
+    source = f"map {map_path}" if map_path else f"waiting for {settings.map_topic}"
+    rospy.loginfo(f"map_updater: ready ({source}; scans on {', '.join(settings.scan_topics)})")
+    rospy.spin()
+    return 0
+
+
+def _config_sections(path) -> dict:
+    import yaml
+
+    from .settings import SECTIONS, NodeSettingsError, did_you_mean
+
+    try:
+        values = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as e:
+        raise NodeSettingsError(f"{path}: cannot read the configuration: {e}") from None
+    if not isinstance(values, dict):
+        raise NodeSettingsError(f"{path}: expected sections {', '.join(SECTIONS)}")
+    for key in values:
+        if key not in SECTIONS:
+            raise NodeSettingsError(f"{path}: unknown section '{key}'"
+                                    f"{did_you_mean(key, SECTIONS).replace('~', '')}")
+    return values

@@ -1,0 +1,83 @@
+"""The ROS 1 node's parameters and grid conversions, without ROS."""
+
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapUpdatingError, OccupancyGrid
+from scenarios.ros1.grids import changed_box, grid_from_message, message_fields
+from scenarios.ros1.settings import NodeSettings, NodeSettingsError, node_settings
+
+
+def test_defaults_are_rosy_and_sections_reach_the_configs():
+    settings, upd, check = node_settings({})
+    assert (settings.map_frame, settings.odom_frame, settings.base_frame) == \
+        ("map", "odom", "base_link")
+    assert settings.scan_topics == ("scan",) and settings.publish_period == 1.0
+    settings, upd, check = node_settings(
+        {"updater": {"threshold": 9}, "pose_check": {"max_gain": 0.02},
+         "scan_topics": ["front", "rear"], "publish_period": 2},
+        base={"updater": {"threshold": 5, "min_run": 2}, "localizer": {"max_particles": 900}})
+    assert upd.threshold == 9 and upd.min_run == 2          # parameters over the file
+    assert check.max_gain == 0.02 and settings.scan_topics == ("front", "rear")
+    assert settings.publish_period == 2.0
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"updater": {"treshold": 5}}, ["unknown key 'treshold'", "did you mean 'threshold'"]),
+    ({"pose_check": {"max_gian": 0.1}}, ["unknown key 'max_gian'", "'max_gain'"]),
+    ({"map_frme": "world"}, ["unknown parameter '~map_frme'", "'~map_frame'"]),
+    ({"publish_period": -1.0}, ["'~publish_period'", "[0.01, 3600]"]),
+    ({"publish_period": "fast"}, ["'~publish_period'"]),
+    ({"queue_size": 0}, ["'~queue_size'"]),
+    ({"scan_topics": []}, ["'~scan_topics'"]),
+    ({"use_pose_check": "yes"}, ["'~use_pose_check'"]),
+    ({"updater": 3}, ["'~updater' must be a mapping"]),
+])
+def test_bad_parameters_are_refused_with_a_line_that_names_them(params, words):
+    with pytest.raises(MapUpdatingError) as e:
+        node_settings(params)
+    assert all(w in str(e.value) for w in words), str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_node_settings_validate_on_their_own():
+    with pytest.raises(NodeSettingsError, match="'~base_frame'"):
+        NodeSettings(base_frame="")
+
+
+def msg_of(grid: OccupancyGrid, yaw_w=1.0, yaw_z=0.0, data=None):
+    f = message_fields(grid)
+    origin = NS(position=NS(x=f["origin"][0], y=f["origin"][1]),
+                orientation=NS(x=0.0, y=0.0, z=yaw_z, w=yaw_w))
+    info = NS(width=f["width"], height=f["height"], resolution=f["resolution"], origin=origin)
+    return NS(info=info, data=f["data"] if data is None else data)
+
+
+def test_a_grid_survives_the_round_trip_through_message_fields():
+    cells = np.array([[FREE, OCCUPIED, UNKNOWN], [UNKNOWN, FREE, FREE]], np.int8)
+    grid = OccupancyGrid(cells, 0.05, (-1.0, 2.5))
+    f = message_fields(grid)
+    assert (f["width"], f["height"]) == (3, 2) and f["data"][:3] == [0, 100, -1]  # row 0 first
+    back = grid_from_message(msg_of(grid))
+    assert np.array_equal(back.data, cells) and back.origin == (-1.0, 2.5)
+
+
+def test_probabilities_are_read_with_map_servers_thresholds_and_bad_maps_refused():
+    grid = OccupancyGrid(np.zeros((1, 5), np.int8), 0.1, (0.0, 0.0))
+    got = grid_from_message(msg_of(grid, data=[0, 19, 20, 65, -1])).data[0]
+    assert list(got) == [FREE, FREE, UNKNOWN, OCCUPIED, UNKNOWN]
+    with pytest.raises(GridError, match="rotated"):
+        grid_from_message(msg_of(grid, yaw_w=0.7071, yaw_z=0.7071))
+    with pytest.raises(GridError, match="4 cells, not width x height = 5 x 1"):
+        grid_from_message(msg_of(grid, data=[0, 0, 0, 0]))
+
+
+def test_changed_box_is_the_smallest_box_around_the_changes():
+    a = np.zeros((6, 8), np.int8)
+    b = a.copy()
+    assert changed_box(a, b) is None
+    b[1, 2] = 100
+    b[4, 6] = -1
+    assert changed_box(a, b) == (2, 1, 5, 4)       # x, y, width, height

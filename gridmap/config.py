@@ -3,9 +3,10 @@ package does it: unknown keys are refused with the nearest valid name."""
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import fields
 from pathlib import Path
+
+from .suggest import did_you_mean
 
 
 def config_from_dict(cls, values, error: type[Exception], source: str):
@@ -16,9 +17,7 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
     known = [f.name for f in fields(cls)]
     for key in values:
         if key not in known:
-            near = difflib.get_close_matches(str(key), known, n=1)
-            hint = f" (did you mean '{near[0]}'?)" if near else ""
-            raise error(f"{source}: unknown key '{key}'{hint}")
+            raise error(f"{source}: unknown key '{key}'{did_you_mean(key, known)}")
     kwargs = {}
     for f in fields(cls):
         if f.name in values:

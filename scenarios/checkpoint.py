@@ -10,8 +10,8 @@ A run's folder holds, besides its outputs, ``state/``:
 - ``progress.json``: the finished sessions in order. It is written last, after everything of
   the session is on disk, so it is the commit point: a session not listed there is run again.
 
-Every file is written to a temporary name and renamed, so a run killed at any instant leaves
-each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
+Every file is written with ``gridmap.atomic`` (a temporary name, flushed, renamed), so a run
+killed at any instant leaves each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
 seeds, which are derived per session from the scenario's seed): maps are saved as trinary
 images, which load back cell for cell, so a resumed run ends with the same maps as a run that
 was never interrupted. A resumed run reads back only what the next sessions need (M1, the
@@ -24,12 +24,12 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from gridmap import MapUpdatingError
+from gridmap.atomic import write_atomically, write_with
 
 FORMAT = 1
 
@@ -43,9 +43,9 @@ def state_dir(out_dir) -> Path:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    from .report import atomic_write_text, json_default
+    from .report import json_default
 
-    atomic_write_text(path, json.dumps(data, indent=1, default=json_default) + "\n")
+    write_atomically(path, json.dumps(data, indent=1, default=json_default) + "\n")
 
 
 def _read_json(path: Path) -> dict:
@@ -147,9 +147,8 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
     res = results[-1]
     _write_json(folder / f"session_{res.name}.json", {"format": FORMAT, "metrics": res.metrics})
     if res.trajectory is not None:
-        tmp = folder / f".session_{res.name}.tmp.npz"
-        np.savez(tmp, **res.trajectory.arrays())
-        os.replace(tmp, folder / f"session_{res.name}.npz")
+        arrays = res.trajectory.arrays()
+        write_with(folder / f"session_{res.name}.npz", lambda f: np.savez(f, **arrays))
     _write_json(folder / "progress.json", {"format": FORMAT,
                                            "finished": [r.name for r in results],
                                            "wall_time_s": wall_time_s})

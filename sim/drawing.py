@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gridmap.atomic import write_with
+
 from . import geometry as geo
 
 COLORS = {"wall": "#555555", "static": "#7f7f7f", "movable": "#c8a165", "pallet": "#d9b44a",
@@ -121,5 +123,5 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
     fig.tight_layout()
     path = Path(path_png)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    write_with(path, lambda f: fig.savefig(f, format=path.suffix.lstrip(".") or "png"))
     return path

@@ -12,12 +12,12 @@ import numpy as np
 from gymnasium import spaces
 
 from gridmap import OccupancyGrid, Pose2D
+from gridmap.map_io import trinary_image
 
 from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
 from ..session import UpdateSession, session_seeds
 
 ENV_ID = "WarehouseMapUpdate-v0"
-PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE = 0, 205, 254   # map_server's trinary image values
 
 
 class WarehouseMapUpdateEnv(gym.Env):
@@ -281,11 +281,7 @@ class WarehouseMapUpdateEnv(gym.Env):
         obs["odometry"] = self._pose_obs(self.world.odom_pose)
         obs["estimate"] = self._pose_obs(self.session.estimate())
         if self._map_observation:
-            d = self.session.updated_map.data[::-1]
-            img = np.full(d.shape, PGM_UNKNOWN, np.uint8)
-            img[d == 0] = PGM_FREE
-            img[d == 100] = PGM_OCCUPIED
-            obs["map"] = img
+            obs["map"] = trinary_image(self.session.updated_map)
         return obs
 
     def _info(self, scans: int) -> dict:

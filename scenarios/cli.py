@@ -30,8 +30,8 @@ def _cmd_render(args) -> int:
     from .catalog import find_scenario
 
     scenario = sim.load_scenario(find_scenario(args.scenario))
-    sim.render_world(scenario, args.session, args.out)
-    print(f"wrote {args.out}")
+    out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
+    print(f"wrote {out}")
     return 0
 
 
@@ -151,9 +151,15 @@ def build_parser() -> argparse.ArgumentParser:
     upd.set_defaults(func=_cmd_update)
 
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
-    ren.add_argument("scenario", nargs="?", default=None)
+    ren.add_argument("scenario", nargs="?", default=None,
+                     help="built-in scenario name or YAML path (default: aws_small_warehouse)")
     ren.add_argument("--session", default="W1", help="session name or index (default W1)")
-    ren.add_argument("--out", type=Path, default=Path("world.png"))
+    ren.add_argument("--out", type=Path, default=Path("world.png"),
+                     help="output PNG (default: world.png)")
+    ren.add_argument("--time", type=float, default=0.0,
+                     help="draw the world at this time [s] of the session (default 0)")
+    ren.add_argument("--seed", type=int, default=None,
+                     help="seed of the world, which places the people (default: the scenario's)")
     ren.set_defaults(func=_cmd_render)
     return p
 

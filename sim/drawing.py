@@ -2,7 +2,9 @@
 
 What the session changed is marked: moved objects are drawn where they went with their old place
 dashed, added objects in green, removed ones as a dashed red outline. The command line entry is
-``python -m sim.render``.
+``mapupdate render``. (A picture of the map a robot holds, drawn every step of the gym
+environment, is ``scenarios.topview``: another job, the map's cells rather than the world's
+geometry.)
 """
 
 from __future__ import annotations

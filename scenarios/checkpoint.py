@@ -31,6 +31,8 @@ import numpy as np
 from gridmap import MapUpdatingError
 from gridmap.atomic import write_atomically, write_with
 
+from .options import RunOptions
+
 FORMAT = 1
 
 
@@ -98,7 +100,6 @@ def resume_options(scenario, options):
     from updater import UpdaterConfig
 
     from .catalog import find_scenario
-    from .runner import RunOptions
 
     if options.out is None:
         raise ResumeError("resuming needs the folder of the run to resume")
@@ -156,7 +157,7 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
 
 def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     """The results of the sessions a run in ``out_dir`` finished (at most ``n``), read back as
-    a run keeps them (``runner.RunResult``): the last one whole, the first with M1, the others
+    a run keeps them (see ``runner.RunResult``): the last one whole, the first with M1, the others
     their name and metrics only; and the wall time they took."""
     from gridmap import load_map
 

@@ -3,10 +3,21 @@ package does it: unknown keys are refused with the nearest valid name."""
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import asdict, fields
 from pathlib import Path
 
 from .suggest import did_you_mean
+
+
+def check_keys(values: dict, known, error: type[Exception], source: str,
+               where: str | None = None) -> None:
+    """Refuse the first key of ``values`` that is not in ``known`` with an ``error`` naming
+    ``source``, ``where`` in it if given (e.g. "section 'updater'") and the nearest valid key."""
+    known = list(known)
+    for key in values:
+        if key not in known:
+            place = f" in {where}" if where else ""
+            raise error(f"{source}: unknown key '{key}'{place}{did_you_mean(key, known)}")
 
 
 def config_from_dict(cls, values, error: type[Exception], source: str):
@@ -14,10 +25,7 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
     where floats are expected (YAML writes 2 for 2.0); errors are ``error``s naming ``source``."""
     if not isinstance(values, dict):
         raise error(f"{source}: expected a mapping of keys, got {type(values).__name__}")
-    known = [f.name for f in fields(cls)]
-    for key in values:
-        if key not in known:
-            raise error(f"{source}: unknown key '{key}'{did_you_mean(key, known)}")
+    check_keys(values, [f.name for f in fields(cls)], error, source)
     kwargs = {}
     for f in fields(cls):
         if f.name in values:
@@ -29,6 +37,11 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
         return cls(**kwargs)
     except error as e:
         raise error(f"{source}: {e}") from None
+
+
+def config_to_dict(config) -> dict:
+    """The keys and values of a configuration dataclass, as ``config_from_dict`` takes them."""
+    return asdict(config)
 
 
 def config_from_yaml(cls, path, error: type[Exception], section: str):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gridmap.config import config_from_dict, config_from_yaml
+from gridmap.config import config_from_dict, config_from_yaml, config_to_dict
 from gridmap.errors import MapUpdatingError
 
 
@@ -96,6 +96,9 @@ class LocalizerConfig:
     @property
     def recovery_enabled(self) -> bool:
         return self.recovery_alpha_slow > 0 and self.recovery_alpha_fast > 0
+
+    def to_dict(self) -> dict:
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, values: dict, source: str = "config") -> LocalizerConfig:

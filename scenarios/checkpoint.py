@@ -62,8 +62,14 @@ def _read_json(path: Path) -> dict:
     return data
 
 
+# The configurations a run records in run.json, each under its key, and their sections of
+# robot_config, through which they are read back (validated like a --config file).
+CONFIG_KEYS = {"updater_config": "updater", "localizer_config": "localizer",
+               "pose_check_config": "pose_check"}
+
+
 def _config_dict(config) -> dict | None:
-    return None if config is None else dataclasses.asdict(config)
+    return None if config is None else config.to_dict()
 
 
 def _sha256(path: Path) -> str:
@@ -95,10 +101,6 @@ def resume_options(scenario, options):
     an option or scenario given that contradicts it is refused, since the resumed run would
     then not be the same run. ``sessions`` may be given (a run can be continued further);
     without it the run goes as far as it was asked to."""
-    from localization import LocalizerConfig
-    from localization.confidence import PoseCheckConfig
-    from updater import UpdaterConfig
-
     from .catalog import find_scenario
 
     if options.out is None:
@@ -120,24 +122,25 @@ def resume_options(scenario, options):
         given = getattr(options, key)
         if given is not None and given != getattr(default, key) and given != value:
             raise ResumeError(f"{path}: the run has {key} = {value}, not {given}")
-    configs = {"updater_config": UpdaterConfig, "localizer_config": LocalizerConfig,
-               "pose_check_config": PoseCheckConfig}
     rebuilt = {}
-    for key, cls in configs.items():
+    for key, section in CONFIG_KEYS.items():
         given = getattr(options, key)
         if given is not None and _config_dict(given) != m[key]:
             raise ResumeError(f"{path}: {key} differs from the one the run started with")
         rebuilt[key] = given if given is not None or m[key] is None else \
-            _from_dict(cls, m[key], path)
+            _recorded_config(section, m[key], path, key)
     sessions = m["sessions"] if options.sessions is None else options.sessions
     return scenario_file, dataclasses.replace(options, **recorded, **rebuilt, sessions=sessions)
 
 
-def _from_dict(cls, values: dict, path: Path):
+def _recorded_config(section: str, values, path: Path, key: str):
+    """A configuration run.json recorded under ``key``, read as a --config file's section."""
+    from .robot_config import section_config
+
     try:
-        return cls(**values)
-    except (TypeError, ValueError) as e:
-        raise ResumeError(f"{path}: {cls.__name__}: {e}") from None
+        return section_config(section, values, str(path), where=f"'{key}'")
+    except MapUpdatingError as e:
+        raise ResumeError(str(e)) from None
 
 
 # --- sessions ----------------------------------------------------------------------------------

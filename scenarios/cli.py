@@ -11,6 +11,12 @@ import sys
 from pathlib import Path
 
 
+CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, each optional, "
+               "holding the fields of updater.UpdaterConfig, localization.LocalizerConfig and "
+               "localization.confidence.PoseCheckConfig; keys a section leaves out keep that "
+               "class's defaults. --pose-check/--no-pose-check still turn the check on or off")
+
+
 def _cmd_compare(args) -> int:
     from gridmap import load_map
     from gridmap.metrics import compare_maps
@@ -38,8 +44,12 @@ def _cmd_render(args) -> int:
 def _cmd_run(args) -> int:
     from .checkpoint import ResumeError
     from .observers import Observers
+    from .robot_config import load_robot_config
     from .runner import RunOptions, run_scenario
 
+    config = load_robot_config(args.config)     # refused before anything is written
+    if args.resume is not None and args.out is not None and args.out != args.resume:
+        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
     observers = []
     if args.bag is not None:
         from .session_bags import SessionBagRecorder
@@ -48,11 +58,11 @@ def _cmd_run(args) -> int:
     recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
     if recorder is not None:
         observers.append(recorder)
-    if args.resume is not None and args.out is not None and args.out != args.resume:
-        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
     given = {} if args.pose_check is None else {"pose_check": args.pose_check}
     opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
                       quick=args.quick, progress=not args.no_progress,
+                      updater_config=config.updater, localizer_config=config.localizer,
+                      pose_check_config=config.pose_check,
                       observer=Observers(*observers) if observers else None,
                       resume=args.resume is not None, **given)
     try:
@@ -77,9 +87,13 @@ def _rerun_recorder(args):
 
 def _cmd_update(args) -> int:
     from .replay import update_from_log
+    from .robot_config import load_robot_config
 
+    config = load_robot_config(args.config)     # refused before the log is read
     summary = update_from_log(args.map, args.log, args.out, args.state,
-                              pose_source=args.poses, updater_config=args.config,
+                              pose_source=args.poses, updater_config=config.updater,
+                              localizer_config=config.localizer,
+                              pose_check_config=config.pose_check,
                               progress=not args.no_progress, log_format=args.format,
                               scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
                               pose_topic=args.pose_topic, pose_check=args.pose_check)
@@ -115,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-progress", action="store_true", help="no progress bars")
     run.add_argument("--resume", type=Path, default=None, metavar="DIR",
                      help="continue the killed run in DIR after its last finished session")
+    run.add_argument("--config", type=Path, default=None, metavar="FILE.yaml", help=CONFIG_HELP)
     run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map or the localiser's "
                           "covariance calls unsure (default: on)")
@@ -138,7 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="updater state file: loaded if present, saved at the end")
     upd.add_argument("--poses", default="auto", choices=["auto", "recorded", "localizer", "truth"],
                      help="where scan poses come from (default: recorded when present)")
-    upd.add_argument("--config", type=Path, default=None, help="updater configuration YAML")
+    upd.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
+                     help=CONFIG_HELP + " (updater keys go under 'updater:', also when they "
+                                        "are the only ones)")
     upd.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
                      help="log format (default: detected)")
     upd.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")

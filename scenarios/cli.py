@@ -111,7 +111,14 @@ def build_parser() -> argparse.ArgumentParser:
         description="Keep a 2D occupancy-grid map true while the world changes.")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = p.add_subparsers(dest="command", required=True)
+    _add_run(sub)
+    _add_compare(sub)
+    _add_update(sub)
+    _add_render(sub)
+    return p
 
+
+def _add_run(sub) -> None:
     run = sub.add_parser("run", help="play a scenario's sessions end to end and report scores")
     run.add_argument("scenario", nargs="?", default=None,
                      help="built-in scenario name or YAML path (default: aws_small_warehouse)")
@@ -139,11 +146,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="show the run live in a rerun viewer (when there is a display)")
     run.set_defaults(func=_cmd_run)
 
+
+def _add_compare(sub) -> None:
     cmp_ = sub.add_parser("compare", help="CC, MS and OPDF of two map_server maps")
     cmp_.add_argument("a", type=Path)
     cmp_.add_argument("b", type=Path)
     cmp_.set_defaults(func=_cmd_compare)
 
+
+def _add_update(sub) -> None:
     upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
     upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
     upd.add_argument("--log", type=Path, required=True,
@@ -167,6 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "covariance) calls unsure (default: off; README, 'Choices')")
     upd.set_defaults(func=_cmd_update)
 
+
+def _add_render(sub) -> None:
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
     ren.add_argument("scenario", nargs="?", default=None,
                      help="built-in scenario name or YAML path (default: aws_small_warehouse)")
@@ -178,7 +191,6 @@ def build_parser() -> argparse.ArgumentParser:
     ren.add_argument("--seed", type=int, default=None,
                      help="seed of the world, which places the people (default: the scenario's)")
     ren.set_defaults(func=_cmd_render)
-    return p
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

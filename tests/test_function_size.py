@@ -1,5 +1,5 @@
 """Functions stay short enough to read as named steps: none over 60 lines, from ``def`` to the
-end of its body, outside the updater (whose layout follows ALGORITHM.md on its own terms)."""
+end of its body, in every package but the updater."""
 
 import ast
 import pathlib

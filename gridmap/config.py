@@ -44,8 +44,9 @@ def config_to_dict(config) -> dict:
     return asdict(config)
 
 
-def config_from_yaml(cls, path, error: type[Exception], section: str):
-    """Load a configuration from YAML holding the keys at the top level or under ``section``."""
+def config_from_yaml(cls, path, error: type[Exception], section: str, *also: str):
+    """Load a configuration from YAML holding the keys at the top level or under ``section``
+    (or under one of the other names ``also``)."""
     import yaml
 
     path = Path(path)
@@ -53,6 +54,6 @@ def config_from_yaml(cls, path, error: type[Exception], section: str):
         values = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as e:
         raise error(f"{path}: cannot read the {section} configuration: {e}") from None
-    if isinstance(values, dict) and set(values) == {section}:
-        values = values[section] or {}
+    if isinstance(values, dict) and len(values) == 1 and next(iter(values)) in (section, *also):
+        values = next(iter(values.values())) or {}
     return config_from_dict(cls, values, error, str(path))

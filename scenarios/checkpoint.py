@@ -11,10 +11,10 @@ A run's folder holds, besides its outputs, ``state/``:
   the session is on disk, so it is the commit point: a session not listed there is run again.
 
 Every file is written with ``gridmap.atomic`` (a temporary name, flushed, renamed), so a run
-killed at any instant leaves each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
-seeds, which are derived per session from the scenario's seed): maps are saved as trinary
-images, which load back cell for cell, so a resumed run ends with the same maps as a run that
-was never interrupted. A resumed run reads back only what the next sessions need (M1, the
+killed at any instant leaves each file either as it was or complete. What the next session
+needs is M_{i-1} and M1 (and the seeds, which are derived per session from the scenario's
+seed): maps are saved as trinary images, which load back cell for cell, so a resumed run ends
+with the same maps as a run that was never interrupted. A resumed run reads back only what the next sessions need (M1, the
 last finished session whole, the metrics of the others), so its memory does not grow with the
 number of sessions finished.
 """
@@ -160,8 +160,8 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
 
 def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     """The results of the sessions a run in ``out_dir`` finished (at most ``n``), read back as
-    a run keeps them (see ``runner.RunResult``): the last one whole, the first with M1, the others
-    their name and metrics only; and the wall time they took."""
+    a run keeps them (see ``runner.RunResult``): the last one whole, the first with M1, the
+    others their name and metrics only; and the wall time they took."""
     from gridmap import load_map
 
     from .session import SessionResult

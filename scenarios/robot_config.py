@@ -25,6 +25,13 @@ from pathlib import Path
 from gridmap import MapUpdatingError
 from gridmap.config import check_keys
 from gridmap.suggest import did_you_mean
+from localization import LocalizerConfig
+from localization.confidence import PoseCheckConfig
+from updater import UpdaterConfig
+
+# The sections of the file and the configuration each holds.
+CLASSES = {"updater": UpdaterConfig, "localizer": LocalizerConfig, "pose_check": PoseCheckConfig}
+SECTIONS = tuple(CLASSES)
 
 
 class ConfigError(MapUpdatingError, ValueError):
@@ -32,26 +39,13 @@ class ConfigError(MapUpdatingError, ValueError):
     section and the key."""
 
 
-def _sections() -> dict[str, type]:
-    # imported here: the command line parses its arguments before the robot software loads
-    from localization import LocalizerConfig
-    from localization.confidence import PoseCheckConfig
-    from updater import UpdaterConfig
-
-    return {"updater": UpdaterConfig, "localizer": LocalizerConfig,
-            "pose_check": PoseCheckConfig}
-
-
-SECTIONS = ("updater", "localizer", "pose_check")
-
-
 @dataclass(frozen=True)
 class RobotConfig:
     """One configuration per component; None where none was given (the caller's default)."""
 
-    updater: object | None = None       # updater.UpdaterConfig
-    localizer: object | None = None     # localization.LocalizerConfig
-    pose_check: object | None = None    # localization.confidence.PoseCheckConfig
+    updater: UpdaterConfig | None = None
+    localizer: LocalizerConfig | None = None
+    pose_check: PoseCheckConfig | None = None
 
     def to_dict(self) -> dict:
         """The sections given, as ``load_robot_config`` takes them."""
@@ -89,7 +83,7 @@ def _section_hint(name) -> str:
     near = did_you_mean(name, SECTIONS)
     if near:
         return near
-    for section, cls in _sections().items():
+    for section, cls in CLASSES.items():
         if name in [f.name for f in fields(cls)]:
             return f" ('{name}' is a key of section '{section}': put it under '{section}:')"
     return f" (sections: {', '.join(SECTIONS)})"
@@ -98,7 +92,7 @@ def _section_hint(name) -> str:
 def section_config(name: str, values, source: str, where: str | None = None):
     """The configuration of section ``name`` (one of ``SECTIONS``) from its mapping of keys;
     ``where`` says in errors where the mapping is (default: "section '<name>'")."""
-    cls = _sections()[name]
+    cls = CLASSES[name]
     where = where or f"section '{name}'"
     if not isinstance(values, dict):
         raise ConfigError(f"{source}: {where} must be a mapping of keys, got "

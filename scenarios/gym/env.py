@@ -137,7 +137,6 @@ class WarehouseMapUpdateEnv(gym.Env):
         from ..robot_config import load_robot_config
 
         robot = load_robot_config(config, source="config")
-
         self.scenario = _load_scenario(scenario, quick)
         self.session_index = self.scenario.session_index(session)
         if self.scenario.sessions[self.session_index].mapping:

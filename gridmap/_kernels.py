@@ -51,18 +51,23 @@ def _cell_of(v, n):
 
 
 @njit(cache=True)
-def traverse(gx0, gy0, gx1, gy1, height, width, rows, cols):
-    """Every cell the segment (gx0, gy0)-(gx1, gy1) passes through, in order from the start,
-    clipped to the grid. Writes into ``rows``/``cols`` and returns the count (at most their
-    length). The walk is 4-connected: where the segment crosses a cell corner exactly, the cell
-    beside the corner in x comes first, so no cell is skipped."""
+def _axis_step(c, g0, d):
+    """One axis of the grid walk (Amanatides and Woo) from g0 in cell c along d: (step, the
+    parameter between two crossings of that axis's cell edges, the parameter of the first)."""
+    step = 1 if d > 0 else -1
+    if d == 0.0:
+        return step, np.inf, np.inf
+    t_max = ((c + 1 - g0) / d) if d > 0 else ((c - g0) / d)
+    return step, abs(1.0 / d), t_max
+
+
+@njit(cache=True)
+def _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width):
+    """(cx, cy, ex, ey): the cells where the segment, clipped to [t0, t1], enters and leaves
+    the grid. An end point inside the grid is used as given: gx0 + 1.0 * (gx1 - gx0) can round
+    to the other side of a cell edge and lose the end cell."""
     dx = gx1 - gx0
     dy = gy1 - gy0
-    t0, t1 = clip_to_box(gx0, gy0, dx, dy, float(width), float(height))
-    if t0 > t1:
-        return 0
-    # An end point inside the grid is used as given: gx0 + 1.0 * (gx1 - gx0) can round to the
-    # other side of a cell edge and lose the end cell.
     if t0 > 0.0:
         cx = _cell_of(gx0 + t0 * dx, width)
         cy = _cell_of(gy0 + t0 * dy, height)
@@ -75,21 +80,23 @@ def traverse(gx0, gy0, gx1, gy1, height, width, rows, cols):
     else:
         ex = _cell_of(gx1, width)
         ey = _cell_of(gy1, height)
-    step_x = 1 if dx > 0 else -1
-    step_y = 1 if dy > 0 else -1
-    inf = np.inf
-    if dx != 0.0:
-        t_delta_x = abs(1.0 / dx)
-        t_max_x = ((cx + 1 - gx0) / dx) if dx > 0 else ((cx - gx0) / dx)
-    else:
-        t_delta_x = inf
-        t_max_x = inf
-    if dy != 0.0:
-        t_delta_y = abs(1.0 / dy)
-        t_max_y = ((cy + 1 - gy0) / dy) if dy > 0 else ((cy - gy0) / dy)
-    else:
-        t_delta_y = inf
-        t_max_y = inf
+    return cx, cy, ex, ey
+
+
+@njit(cache=True)
+def traverse(gx0, gy0, gx1, gy1, height, width, rows, cols):
+    """Every cell the segment (gx0, gy0)-(gx1, gy1) passes through, in order from the start,
+    clipped to the grid. Writes into ``rows``/``cols`` and returns the count (at most their
+    length). The walk is 4-connected: where the segment crosses a cell corner exactly, the cell
+    beside the corner in x comes first, so no cell is skipped."""
+    dx = gx1 - gx0
+    dy = gy1 - gy0
+    t0, t1 = clip_to_box(gx0, gy0, dx, dy, float(width), float(height))
+    if t0 > t1:
+        return 0
+    cx, cy, ex, ey = _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, dx)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, dy)
     # Exactly |ex - cx| + |ey - cy| unit steps lead to the end cell; counting them (rather than
     # testing t against the end) keeps the walk from overshooting through rounding.
     n_steps = abs(ex - cx) + abs(ey - cy)
@@ -146,21 +153,8 @@ def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
     py = gy0 + t * sin_a
     cx = _cell_of(px, width)
     cy = _cell_of(py, height)
-    step_x = 1 if cos_a > 0 else -1
-    step_y = 1 if sin_a > 0 else -1
-    inf = np.inf
-    if cos_a != 0.0:
-        t_delta_x = abs(1.0 / cos_a)
-        t_max_x = ((cx + 1 - gx0) / cos_a) if cos_a > 0 else ((cx - gx0) / cos_a)
-    else:
-        t_delta_x = inf
-        t_max_x = inf
-    if sin_a != 0.0:
-        t_delta_y = abs(1.0 / sin_a)
-        t_max_y = ((cy + 1 - gy0) / sin_a) if sin_a > 0 else ((cy - gy0) / sin_a)
-    else:
-        t_delta_y = inf
-        t_max_y = inf
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
     # While the next crossing lies safely before both the grid exit and max_len, the next cell
     # is inside the grid: this loop needs no bounds checks (about 10 % faster per step).
     t_safe = min(t_end, max_len) - 1e-6

@@ -3,9 +3,21 @@ package does it: unknown keys are refused with the nearest valid name."""
 
 from __future__ import annotations
 
-import difflib
-from dataclasses import fields
+from dataclasses import asdict, fields
 from pathlib import Path
+
+from .suggest import did_you_mean
+
+
+def check_keys(values: dict, known, error: type[Exception], source: str,
+               where: str | None = None) -> None:
+    """Refuse the first key of ``values`` that is not in ``known`` with an ``error`` naming
+    ``source``, ``where`` in it if given (e.g. "section 'updater'") and the nearest valid key."""
+    known = list(known)
+    for key in values:
+        if key not in known:
+            place = f" in {where}" if where else ""
+            raise error(f"{source}: unknown key '{key}'{place}{did_you_mean(key, known)}")
 
 
 def config_from_dict(cls, values, error: type[Exception], source: str):
@@ -13,12 +25,7 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
     where floats are expected (YAML writes 2 for 2.0); errors are ``error``s naming ``source``."""
     if not isinstance(values, dict):
         raise error(f"{source}: expected a mapping of keys, got {type(values).__name__}")
-    known = [f.name for f in fields(cls)]
-    for key in values:
-        if key not in known:
-            near = difflib.get_close_matches(str(key), known, n=1)
-            hint = f" (did you mean '{near[0]}'?)" if near else ""
-            raise error(f"{source}: unknown key '{key}'{hint}")
+    check_keys(values, [f.name for f in fields(cls)], error, source)
     kwargs = {}
     for f in fields(cls):
         if f.name in values:
@@ -32,8 +39,14 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
         raise error(f"{source}: {e}") from None
 
 
-def config_from_yaml(cls, path, error: type[Exception], section: str):
-    """Load a configuration from YAML holding the keys at the top level or under ``section``."""
+def config_to_dict(config) -> dict:
+    """The keys and values of a configuration dataclass, as ``config_from_dict`` takes them."""
+    return asdict(config)
+
+
+def config_from_yaml(cls, path, error: type[Exception], section: str, *also: str):
+    """Load a configuration from YAML holding the keys at the top level or under ``section``
+    (or under one of the other names ``also``)."""
     import yaml
 
     path = Path(path)
@@ -41,6 +54,6 @@ def config_from_yaml(cls, path, error: type[Exception], section: str):
         values = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as e:
         raise error(f"{path}: cannot read the {section} configuration: {e}") from None
-    if isinstance(values, dict) and set(values) == {section}:
-        values = values[section] or {}
+    if isinstance(values, dict) and len(values) == 1 and next(iter(values)) in (section, *also):
+        values = next(iter(values.values())) or {}
     return config_from_dict(cls, values, error, str(path))

@@ -35,7 +35,8 @@ MODES = ("trinary", "scale", "raw")
 REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 
 # What map_saver writes: these grey levels and thresholds read back as the same three states
-# (205 gives occ = 50/255 = 0.19608, just above free_thresh, so it stays unknown).
+# (205 gives occ = 50/255 = 0.19608, just above free_thresh, so it stays unknown). The one place
+# the project defines them; pictures of a map in these grey levels use ``trinary_image``.
 PIXEL_FREE = 254
 PIXEL_OCCUPIED = 0
 PIXEL_UNKNOWN = 205
@@ -272,12 +273,8 @@ def save_map(grid: OccupancyGrid, path) -> tuple[Path, Path]:
     image_path = path.with_suffix(".pgm")
     if image_path == path:
         raise MapFileError(f"{path}: the YAML file needs a name that does not end in .pgm")
-    d = grid.data
-    pixels = np.full(d.shape, PIXEL_UNKNOWN, np.uint8)
-    pixels[(d >= 0) & (d <= 25)] = PIXEL_FREE
-    pixels[d >= 65] = PIXEL_OCCUPIED
     header = f"P5\n# map resolution {grid.resolution:.6g} m/cell\n{grid.width} {grid.height}\n255\n"
-    _write_atomically(image_path, header.encode("ascii") + pixels[::-1].tobytes())
+    _write_atomically(image_path, header.encode("ascii") + trinary_image(grid).tobytes())
     meta = {
         "image": image_path.name,
         "mode": "trinary",
@@ -290,6 +287,17 @@ def save_map(grid: OccupancyGrid, path) -> tuple[Path, Path]:
     }
     _write_atomically(path, yaml.safe_dump(meta, sort_keys=False, default_flow_style=None).encode())
     return path, image_path
+
+
+def trinary_image(grid: OccupancyGrid) -> np.ndarray:
+    """The map as map_saver draws it: (H, W) uint8, image row 0 the top (the highest y), free
+    ``PIXEL_FREE``, occupied ``PIXEL_OCCUPIED``, unknown ``PIXEL_UNKNOWN``. Cells 0..25 count
+    as free and 65..100 as occupied (map_saver's rule, exact for trinary grids)."""
+    d = grid.data
+    pixels = np.full(d.shape, PIXEL_UNKNOWN, np.uint8)
+    pixels[(d >= 0) & (d <= 25)] = PIXEL_FREE
+    pixels[d >= 65] = PIXEL_OCCUPIED
+    return np.ascontiguousarray(pixels[::-1])
 
 
 def _write_atomically(path: Path, content: bytes) -> None:

@@ -39,6 +39,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from gridmap import OccupancyGrid, Pose2D, PoseVerdict, Scan
+from gridmap.config import config_from_dict, config_from_yaml, config_to_dict
 from gridmap.distance import distance_to_occupied
 
 from .config import LocalizationError
@@ -100,6 +101,19 @@ class PoseCheckConfig:
                                         f">= 0, got {v!r}")
         if self.cap <= 0:
             raise LocalizationError(f"pose check key 'cap' must be > 0, got {self.cap!r}")
+
+    def to_dict(self) -> dict:
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict, source: str = "pose check config") -> PoseCheckConfig:
+        """Build from a mapping; an unknown key is refused with the nearest valid name."""
+        return config_from_dict(cls, values, LocalizationError, source)
+
+    @classmethod
+    def from_yaml(cls, path) -> PoseCheckConfig:
+        """Load from a YAML file holding the keys at the top level (or under ``pose_check:``)."""
+        return config_from_yaml(cls, path, LocalizationError, "pose_check")
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gridmap.config import config_from_dict, config_from_yaml
+from gridmap.config import config_from_dict, config_from_yaml, config_to_dict
 from gridmap.errors import MapUpdatingError
 
 
@@ -97,6 +97,9 @@ class LocalizerConfig:
     def recovery_enabled(self) -> bool:
         return self.recovery_alpha_slow > 0 and self.recovery_alpha_fast > 0
 
+    def to_dict(self) -> dict:
+        return config_to_dict(self)
+
     @classmethod
     def from_dict(cls, values: dict, source: str = "config") -> LocalizerConfig:
         """Build from a mapping; an unknown key is refused with the nearest valid name."""
@@ -104,8 +107,9 @@ class LocalizerConfig:
 
     @classmethod
     def from_yaml(cls, path) -> LocalizerConfig:
-        """Load from a YAML file holding the keys at the top level (or under ``localization:``)."""
-        return config_from_yaml(cls, path, LocalizationError, "localization")
+        """Load from a YAML file holding the keys at the top level (or under ``localization:``,
+        or ``localizer:`` as in the robot configuration file of ``scenarios.robot_config``)."""
+        return config_from_yaml(cls, path, LocalizationError, "localization", "localizer")
 
 
 def _check(name, value, ok, what):

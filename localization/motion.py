@@ -3,16 +3,18 @@
 As in nav2's DifferentialMotionModel: the step between two odometry poses is split into a
 rotation, a translation and a rotation; noise variances grow with alpha1..alpha4; and backward
 motion is treated like forward motion for the noise (a reversing robot's rot1 is near pi, which
-must not read as a large turn).
+must not read as a large turn). The step and the size of a turn are ``gridmap.motion``'s, the
+same the simulator's odometry uses.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from gridmap import Pose2D, wrap_angle
+from gridmap import Pose2D
+from gridmap.motion import odometry_delta, turn_for_noise
+
+__all__ = ["motion_sigmas", "odometry_delta", "sample_motion"]
 
 
 def _kernels():
@@ -21,22 +23,14 @@ def _kernels():
     return _kernels
 
 
-def odometry_delta(previous: Pose2D, current: Pose2D) -> tuple[float, float, float]:
-    """(rot1 [rad], trans [m], rot2 [rad]) that take ``previous`` to ``current``."""
-    dx, dy = current.x - previous.x, current.y - previous.y
-    trans = math.hypot(dx, dy)
-    # A bearing between two nearly equal positions is noise (in-place rotation): nav2 sets it 0.
-    rot1 = 0.0 if trans < 0.01 else wrap_angle(math.atan2(dy, dx) - previous.theta)
-    rot2 = wrap_angle(current.theta - previous.theta - rot1)
-    return rot1, trans, rot2
-
-
 def motion_sigmas(delta, alphas) -> np.ndarray:
     """Standard deviations of (rot1, trans, rot2) for one odometry step."""
     rot1, trans, rot2 = delta
     a1, a2, a3, a4 = alphas
-    r1 = min(abs(wrap_angle(rot1)), abs(wrap_angle(rot1 - math.pi)))
-    r2 = min(abs(wrap_angle(rot2)), abs(wrap_angle(rot2 - math.pi)))
+    r1, r2 = turn_for_noise(rot1), turn_for_noise(rot2)
+    # The simulator's sim.odometry.motion_sigmas sums the turns before scaling them; the two
+    # forms round differently in the last bit, and each is kept so that recorded results stay
+    # bit for bit the same (see there).
     return np.sqrt([a1 * r1 * r1 + a2 * trans * trans,
                     a3 * trans * trans + a4 * r1 * r1 + a4 * r2 * r2,
                     a1 * r2 * r2 + a2 * trans * trans])

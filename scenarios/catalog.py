@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 
 from gridmap import MapUpdatingError
+from gridmap.suggest import did_you_mean
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_SCENARIO = "aws_small_warehouse"
@@ -32,7 +32,6 @@ def find_scenario(name_or_path: str | Path | None = None) -> Path:
     if candidate.is_file():
         return candidate
     names = builtin_scenarios()
-    hint = difflib.get_close_matches(str(name_or_path), names, n=1)
-    more = f"; did you mean {hint[0]!r}?" if hint else ""
-    raise ScenarioNotFound(
-        f"no scenario named {str(name_or_path)!r} (built-in: {', '.join(names) or 'none'}){more}")
+    raise ScenarioNotFound(f"no scenario named {str(name_or_path)!r}"
+                           f"{did_you_mean(name_or_path, names)}; built-in: "
+                           f"{', '.join(names) or 'none'}")

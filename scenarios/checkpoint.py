@@ -10,11 +10,11 @@ A run's folder holds, besides its outputs, ``state/``:
 - ``progress.json``: the finished sessions in order. It is written last, after everything of
   the session is on disk, so it is the commit point: a session not listed there is run again.
 
-Every file is written to a temporary name and renamed, so a run killed at any instant leaves
-each file either as it was or complete. What the next session needs is M_{i-1} and M1 (and the
-seeds, which are derived per session from the scenario's seed): maps are saved as trinary
-images, which load back cell for cell, so a resumed run ends with the same maps as a run that
-was never interrupted. A resumed run reads back only what the next sessions need (M1, the
+Every file is written with ``gridmap.atomic`` (a temporary name, flushed, renamed), so a run
+killed at any instant leaves each file either as it was or complete. What the next session
+needs is M_{i-1} and M1 (and the seeds, which are derived per session from the scenario's
+seed): maps are saved as trinary images, which load back cell for cell, so a resumed run ends
+with the same maps as a run that was never interrupted. A resumed run reads back only what the next sessions need (M1, the
 last finished session whole, the metrics of the others), so its memory does not grow with the
 number of sessions finished.
 """
@@ -24,12 +24,14 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from gridmap import MapUpdatingError
+from gridmap.atomic import write_atomically, write_with
+
+from .options import RunOptions
 
 FORMAT = 1
 
@@ -43,9 +45,9 @@ def state_dir(out_dir) -> Path:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    from .report import atomic_write_text, json_default
+    from .report import json_default
 
-    atomic_write_text(path, json.dumps(data, indent=1, default=json_default) + "\n")
+    write_atomically(path, json.dumps(data, indent=1, default=json_default) + "\n")
 
 
 def _read_json(path: Path) -> dict:
@@ -60,8 +62,14 @@ def _read_json(path: Path) -> dict:
     return data
 
 
+# The configurations a run records in run.json, each under its key, and their sections of
+# robot_config, through which they are read back (validated like a --config file).
+CONFIG_KEYS = {"updater_config": "updater", "localizer_config": "localizer",
+               "pose_check_config": "pose_check"}
+
+
 def _config_dict(config) -> dict | None:
-    return None if config is None else dataclasses.asdict(config)
+    return None if config is None else config.to_dict()
 
 
 def _sha256(path: Path) -> str:
@@ -93,12 +101,7 @@ def resume_options(scenario, options):
     an option or scenario given that contradicts it is refused, since the resumed run would
     then not be the same run. ``sessions`` may be given (a run can be continued further);
     without it the run goes as far as it was asked to."""
-    from localization import LocalizerConfig
-    from localization.confidence import PoseCheckConfig
-    from updater import UpdaterConfig
-
     from .catalog import find_scenario
-    from .runner import RunOptions
 
     if options.out is None:
         raise ResumeError("resuming needs the folder of the run to resume")
@@ -119,24 +122,25 @@ def resume_options(scenario, options):
         given = getattr(options, key)
         if given is not None and given != getattr(default, key) and given != value:
             raise ResumeError(f"{path}: the run has {key} = {value}, not {given}")
-    configs = {"updater_config": UpdaterConfig, "localizer_config": LocalizerConfig,
-               "pose_check_config": PoseCheckConfig}
     rebuilt = {}
-    for key, cls in configs.items():
+    for key, section in CONFIG_KEYS.items():
         given = getattr(options, key)
         if given is not None and _config_dict(given) != m[key]:
             raise ResumeError(f"{path}: {key} differs from the one the run started with")
         rebuilt[key] = given if given is not None or m[key] is None else \
-            _from_dict(cls, m[key], path)
+            _recorded_config(section, m[key], path, key)
     sessions = m["sessions"] if options.sessions is None else options.sessions
     return scenario_file, dataclasses.replace(options, **recorded, **rebuilt, sessions=sessions)
 
 
-def _from_dict(cls, values: dict, path: Path):
+def _recorded_config(section: str, values, path: Path, key: str):
+    """A configuration run.json recorded under ``key``, read as a --config file's section."""
+    from .robot_config import section_config
+
     try:
-        return cls(**values)
-    except (TypeError, ValueError) as e:
-        raise ResumeError(f"{path}: {cls.__name__}: {e}") from None
+        return section_config(section, values, str(path), where=f"'{key}'")
+    except MapUpdatingError as e:
+        raise ResumeError(str(e)) from None
 
 
 # --- sessions ----------------------------------------------------------------------------------
@@ -147,9 +151,8 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
     res = results[-1]
     _write_json(folder / f"session_{res.name}.json", {"format": FORMAT, "metrics": res.metrics})
     if res.trajectory is not None:
-        tmp = folder / f".session_{res.name}.tmp.npz"
-        np.savez(tmp, **res.trajectory.arrays())
-        os.replace(tmp, folder / f"session_{res.name}.npz")
+        arrays = res.trajectory.arrays()
+        write_with(folder / f"session_{res.name}.npz", lambda f: np.savez(f, **arrays))
     _write_json(folder / "progress.json", {"format": FORMAT,
                                            "finished": [r.name for r in results],
                                            "wall_time_s": wall_time_s})
@@ -157,8 +160,8 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
 
 def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     """The results of the sessions a run in ``out_dir`` finished (at most ``n``), read back as
-    a run keeps them (``runner.RunResult``): the last one whole, the first with M1, the others
-    their name and metrics only; and the wall time they took."""
+    a run keeps them (see ``runner.RunResult``): the last one whole, the first with M1, the
+    others their name and metrics only; and the wall time they took."""
     from gridmap import load_map
 
     from .session import SessionResult

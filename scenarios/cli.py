@@ -11,6 +11,12 @@ import sys
 from pathlib import Path
 
 
+CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, each optional, "
+               "holding the fields of updater.UpdaterConfig, localization.LocalizerConfig and "
+               "localization.confidence.PoseCheckConfig; keys a section leaves out keep that "
+               "class's defaults. --pose-check/--no-pose-check still turn the check on or off")
+
+
 def _cmd_compare(args) -> int:
     from gridmap import load_map
     from gridmap.metrics import compare_maps
@@ -30,16 +36,20 @@ def _cmd_render(args) -> int:
     from .catalog import find_scenario
 
     scenario = sim.load_scenario(find_scenario(args.scenario))
-    sim.render_world(scenario, args.session, args.out)
-    print(f"wrote {args.out}")
+    out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
+    print(f"wrote {out}")
     return 0
 
 
 def _cmd_run(args) -> int:
     from .checkpoint import ResumeError
     from .observers import Observers
+    from .robot_config import load_robot_config
     from .runner import RunOptions, run_scenario
 
+    config = load_robot_config(args.config)     # refused before anything is written
+    if args.resume is not None and args.out is not None and args.out != args.resume:
+        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
     observers = []
     if args.bag is not None:
         from .session_bags import SessionBagRecorder
@@ -48,11 +58,11 @@ def _cmd_run(args) -> int:
     recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
     if recorder is not None:
         observers.append(recorder)
-    if args.resume is not None and args.out is not None and args.out != args.resume:
-        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
     given = {} if args.pose_check is None else {"pose_check": args.pose_check}
     opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
                       quick=args.quick, progress=not args.no_progress,
+                      updater_config=config.updater, localizer_config=config.localizer,
+                      pose_check_config=config.pose_check,
                       observer=Observers(*observers) if observers else None,
                       resume=args.resume is not None, **given)
     try:
@@ -77,9 +87,13 @@ def _rerun_recorder(args):
 
 def _cmd_update(args) -> int:
     from .replay import update_from_log
+    from .robot_config import load_robot_config
 
+    config = load_robot_config(args.config)     # refused before the log is read
     summary = update_from_log(args.map, args.log, args.out, args.state,
-                              pose_source=args.poses, updater_config=args.config,
+                              pose_source=args.poses, updater_config=config.updater,
+                              localizer_config=config.localizer,
+                              pose_check_config=config.pose_check,
                               progress=not args.no_progress, log_format=args.format,
                               scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
                               pose_topic=args.pose_topic, pose_check=args.pose_check)
@@ -104,7 +118,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Keep a 2D occupancy-grid map true while the world changes.")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = p.add_subparsers(dest="command", required=True)
+    _add_run(sub)
+    _add_compare(sub)
+    _add_update(sub)
+    _add_render(sub)
+    _add_ros1(sub)
+    return p
 
+
+def _add_run(sub) -> None:
     run = sub.add_parser("run", help="play a scenario's sessions end to end and report scores")
     run.add_argument("scenario", nargs="?", default=None,
                      help="built-in scenario name or YAML path (default: aws_small_warehouse)")
@@ -122,6 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-progress", action="store_true", help="no progress bars")
     run.add_argument("--resume", type=Path, default=None, metavar="DIR",
                      help="continue the killed run in DIR after its last finished session")
+    run.add_argument("--config", type=Path, default=None, metavar="FILE.yaml", help=CONFIG_HELP)
     run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map or the localiser's "
                           "covariance calls unsure (default: on)")
@@ -131,11 +154,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="show the run live in a rerun viewer (when there is a display)")
     run.set_defaults(func=_cmd_run)
 
+
+def _add_compare(sub) -> None:
     cmp_ = sub.add_parser("compare", help="CC, MS and OPDF of two map_server maps")
     cmp_.add_argument("a", type=Path)
     cmp_.add_argument("b", type=Path)
     cmp_.set_defaults(func=_cmd_compare)
 
+
+def _add_update(sub) -> None:
     upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
     upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
     upd.add_argument("--log", type=Path, required=True,
@@ -145,7 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="updater state file: loaded if present, saved at the end")
     upd.add_argument("--poses", default="auto", choices=["auto", "recorded", "localizer", "truth"],
                      help="where scan poses come from (default: recorded when present)")
-    upd.add_argument("--config", type=Path, default=None, help="updater configuration YAML")
+    upd.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
+                     help=CONFIG_HELP + " (updater keys go under 'updater:', also when they "
+                                        "are the only ones)")
     upd.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
                      help="log format (default: detected)")
     upd.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
@@ -157,6 +186,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "covariance) calls unsure (default: off; README, 'Choices')")
     upd.set_defaults(func=_cmd_update)
 
+
+
+def _add_ros1(sub) -> None:
     ros = sub.add_parser("ros1", help="run the live ROS 1 node (under a roscore)",
                          description="The map updater as a ROS 1 node: LaserScan and tf in, "
                          "map_updated out; ROS remappings (name:=value) are passed to ROS.")
@@ -168,12 +200,19 @@ def build_parser() -> argparse.ArgumentParser:
                           "parameters (~updater/threshold, ...) override it")
     ros.set_defaults(func=_cmd_ros1)
 
+
+def _add_render(sub) -> None:
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
-    ren.add_argument("scenario", nargs="?", default=None)
+    ren.add_argument("scenario", nargs="?", default=None,
+                     help="built-in scenario name or YAML path (default: aws_small_warehouse)")
     ren.add_argument("--session", default="W1", help="session name or index (default W1)")
-    ren.add_argument("--out", type=Path, default=Path("world.png"))
+    ren.add_argument("--out", type=Path, default=Path("world.png"),
+                     help="output PNG (default: world.png)")
+    ren.add_argument("--time", type=float, default=0.0,
+                     help="draw the world at this time [s] of the session (default 0)")
+    ren.add_argument("--seed", type=int, default=None,
+                     help="seed of the world, which places the people (default: the scenario's)")
     ren.set_defaults(func=_cmd_render)
-    return p
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

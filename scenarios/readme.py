@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .report import atomic_write_text
+from gridmap.atomic import write_atomically
 
 BEGIN = "<!-- run tables: begin -->"
 END = "<!-- run tables: end -->"
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     readme = Path(__file__).resolve().parents[1] / "README.md"
     report = (Path(args[0]) / "report.md").read_text()
-    atomic_write_text(readme, splice(readme.read_text(), report))
+    write_atomically(readme, splice(readme.read_text(), report))
     print(f"updated {readme}")
     return 0
 

@@ -2,8 +2,8 @@
 
 A session's own files (its maps, TUM trajectories and two figures) are written as soon as it
 ends; metrics.json, report.md and the summary figure at the end of the run. Every file is
-written to a temporary name and renamed, so a run killed halfway never leaves a truncated map
-or report.
+written with ``gridmap.atomic`` (a temporary name, flushed, renamed), so a run killed halfway
+never leaves a truncated map or report.
 """
 
 from __future__ import annotations
@@ -18,12 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, OccupancyGrid
-from gridmap.atomic import write_atomically
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """``path`` is always either the old file or the new one, complete."""
-    write_atomically(path, text.encode())
+from gridmap.atomic import write_atomically, write_with
 
 
 def write_session_maps(out_dir: Path, result) -> None:
@@ -39,20 +34,14 @@ def write_session_maps(out_dir: Path, result) -> None:
         save_map(result.oracle, maps / f"oracle_{idx}.yaml")
     if result.masks:
         # per-cell evaluation masks, for anyone who wants to recompute or inspect the scores
-        tmp = maps / f".masks_{idx}.{os.getpid()}.tmp.npz"
-        try:
-            np.savez_compressed(tmp, **result.masks)
-            os.replace(tmp, maps / f"masks_{idx}.npz")
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
+        write_with(maps / f"masks_{idx}.npz", lambda f: np.savez_compressed(f, **result.masks))
 
 
 def write_tum(path: Path, time: np.ndarray, poses: np.ndarray) -> None:
     """Trajectory in TUM format: ``t x y z qx qy qz qw`` with z = 0, yaw as a quaternion."""
     lines = [f"{t:.6f} {p[0]:.6f} {p[1]:.6f} 0 0 0 {math.sin(p[2] / 2):.9f} "
              f"{math.cos(p[2] / 2):.9f}" for t, p in zip(time, poses)]
-    atomic_write_text(path, "\n".join(lines) + ("\n" if lines else ""))
+    write_atomically(path, "\n".join(lines) + ("\n" if lines else ""))
 
 
 def _fmt(v, digits=2) -> str:
@@ -128,9 +117,7 @@ def _map_rgb(grid: OccupancyGrid) -> np.ndarray:
 
 
 def _save_fig(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
+    write_with(path, lambda f: fig.savefig(f, format="png", dpi=110, bbox_inches="tight"))
 
 
 def _pyplot():
@@ -250,7 +237,7 @@ def write_outputs(run) -> None:
     ``write_session_outputs``) and are not written again: ``run.sessions`` no longer holds
     what they are drawn from."""
     out_dir = Path(run.out_dir)
-    atomic_write_text(out_dir / "metrics.json",
+    write_atomically(out_dir / "metrics.json",
                       json.dumps(run.metrics, indent=2, default=json_default) + "\n")
-    atomic_write_text(out_dir / "report.md", render_report(run.metrics))
+    write_atomically(out_dir / "report.md", render_report(run.metrics))
     write_summary_figure(out_dir, run.metrics)

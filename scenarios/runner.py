@@ -13,42 +13,18 @@ import datetime as _dt
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
-from gridmap import OccupancyGrid, Pose2D
+from gridmap import OccupancyGrid
 
+from . import checkpoint
 from .catalog import find_scenario
+from .options import RunOptions, SessionObserver
 from .session import SessionResult, UpdateSession, map_metrics, session_seeds
 
-@dataclass
-class RunOptions:
-    out: Path | None = None
-    seed: int | None = None
-    sessions: int | None = None
-    quick: bool = False
-    progress: bool = True
-    updater_config: object | None = None
-    localizer_config: object | None = None
-    observer: SessionObserver | None = None   # told of every update session's scans
-    # The safeguard against mislocalisation (localization.confidence): scans whose pose the
-    # localiser's covariance or the scan's own fit to M_{i-1} calls unsure change nothing.
-    pose_check: bool = True
-    pose_check_config: object | None = None   # a localization.confidence.PoseCheckConfig
-    resume: bool = False       # continue the run in ``out`` after its last finished session
-
-
-class SessionObserver(Protocol):
-    """What ``RunOptions.observer`` is told, e.g. to record a run (``rerun_log``). Its calls
-    happen outside the timed parts of the session, so its cost never shows in the scores."""
-
-    def session_start(self, scenario, session: int, world, previous: OccupancyGrid,
-                      initial: OccupancyGrid, updater, localizer) -> None: ...
-
-    def scan(self, msg, estimate: Pose2D, report, world, updater, localizer) -> None: ...
-
-    def session_end(self, result: SessionResult) -> None: ...
+__all__ = ["RunOptions", "RunResult", "SessionObserver", "build_initial_map", "run_scenario",
+           "run_update_session"]
 
 
 @dataclass
@@ -157,7 +133,6 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     """Play every session of a scenario, write the outputs and return the results."""
     import sim
 
-    from . import checkpoint
     from .report import write_outputs, write_session_maps, write_session_outputs
 
     options = options or RunOptions()

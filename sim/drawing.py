@@ -2,7 +2,9 @@
 
 What the session changed is marked: moved objects are drawn where they went with their old place
 dashed, added objects in green, removed ones as a dashed red outline. The command line entry is
-``python -m sim.render``.
+``mapupdate render``. (A picture of the map a robot holds, drawn every step of the gym
+environment, is ``scenarios.topview``: another job, the map's cells rather than the world's
+geometry.)
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from gridmap.atomic import write_with
 
 from . import geometry as geo
 
@@ -46,8 +50,33 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
     """Draw the world of ``session`` (index or name) at ``time`` [s] of its run to ``path_png``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.patches import Circle, Polygon, Rectangle
 
+    world = _world_at(scenario, session, seed, time)
+    changes = _changes(scenario, world.index)
+    x0, y0, x1, y1 = scenario.world.bounds
+    w = (x1 - x0) + 2
+    h = (y1 - y0) + 2
+    fig = Figure(figsize=(min(14, 0.5 * w + 2), min(18, 0.5 * h + 1)), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    _draw_objects(ax, scenario, world, changes, show_ids)
+    _draw_people(ax, world)
+    length = _draw_robot(ax, scenario, world)
+    added, moved, removed = changes
+    ax.set_title(f"{scenario.name} / {world.session.name}: {len(world.obstacles)} objects, "
+                 f"{len(world.people())} people, route {length:.0f} m "
+                 f"(+{len(added)} added, {len(moved)} moved, -{len(removed)} removed)",
+                 fontsize=8)
+    _set_axes(ax, scenario.world.bounds)
+    fig.tight_layout()
+    path = Path(path_png)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_with(path, lambda f: fig.savefig(f, format=path.suffix.lstrip(".") or "png"))
+    return path
+
+
+def _world_at(scenario, session, seed, time: float):
+    """The session's world, run up to ``time`` [s]."""
     from .world import World
 
     world = World(scenario, session, seed)
@@ -55,16 +84,16 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
         for msg in world.run():
             if msg.time >= time:
                 break
-    idx, sess = world.index, world.session
-    added, moved, removed = _changes(scenario, idx)
-    changed = {o.id for o in added} | {o.id for o, _ in moved}
+    return world
 
-    x0, y0, x1, y1 = scenario.world.bounds
-    w = (x1 - x0) + 2
-    h = (y1 - y0) + 2
-    fig = Figure(figsize=(min(14, 0.5 * w + 2), min(18, 0.5 * h + 1)), dpi=dpi)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
+
+def _draw_objects(ax, scenario, world, changes, show_ids: bool) -> None:
+    """Walls and objects; changed objects with a heavy edge, moved ones' old places dashed,
+    removed ones as a dashed red outline."""
+    from matplotlib.patches import Polygon
+
+    added, moved, removed = changes
+    changed = {o.id for o in added} | {o.id for o, _ in moved}
     for b in geo.wall_boxes(scenario.world.bounds, scenario.world.wall_thickness):
         ax.add_patch(Polygon(geo.box_corners(b[None])[0], color=COLORS["wall"]))
     for ob in world.obstacles:
@@ -82,7 +111,13 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
     for ob in removed:
         ax.add_patch(Polygon(_outline(ob), fill=False, edgecolor=COLORS["removed"], ls="--",
                              lw=1.2))
-    for spec in sess.people:
+
+
+def _draw_people(ax, world) -> None:
+    """The people's routes (dotted) or wander rectangles, and where they are."""
+    from matplotlib.patches import Circle, Rectangle
+
+    for spec in world.session.people:
         if spec.route is not None:
             r = np.asarray(spec.route + ((spec.route[0],) if spec.loop else ()))
             ax.plot(r[:, 0], r[:, 1], ":", color=COLORS["person"], lw=1)
@@ -92,6 +127,13 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
                                    edgecolor=COLORS["person"], lw=1))
     for x, y, r in world.people():
         ax.add_patch(Circle((x, y), r, color=COLORS["person"]))
+
+
+def _draw_robot(ax, scenario, world) -> float:
+    """The robot's route with arrows along it and the robot where it is; returns the route's
+    length [m]."""
+    from matplotlib.patches import Circle
+
     route = world.follower.waypoints
     ax.plot(route[:, 0], route[:, 1], "-", color=COLORS["robot"], lw=1.2, alpha=0.7)
     for a, b in zip(route[:-1], route[1:]):
@@ -104,11 +146,12 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
                         lw=2))
     ax.plot([p.x, p.x + 0.5 * math.cos(p.theta)], [p.y, p.y + 0.5 * math.sin(p.theta)],
             color=COLORS["robot"], lw=2)
-    length = float(np.hypot(*np.diff(route, axis=0).T).sum())
-    ax.set_title(f"{scenario.name} / {sess.name}: {len(world.obstacles)} objects, "
-                 f"{len(world.people())} people, route {length:.0f} m "
-                 f"(+{len(added)} added, {len(moved)} moved, -{len(removed)} removed)",
-                 fontsize=8)
+    return float(np.hypot(*np.diff(route, axis=0).T).sum())
+
+
+def _set_axes(ax, bounds) -> None:
+    """The walls with a metre around them, a grid every metre, labels in metres."""
+    x0, y0, x1, y1 = bounds
     ax.set_xlim(x0 - 1, x1 + 1)
     ax.set_ylim(y0 - 1, y1 + 1)
     ax.set_aspect("equal")
@@ -118,8 +161,3 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.set_xlabel("x [m]", fontsize=7)
     ax.set_ylabel("y [m]", fontsize=7)
-    fig.tight_layout()
-    path = Path(path_png)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path

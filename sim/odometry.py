@@ -1,5 +1,6 @@
 """Wheel odometry that drifts: the odometry motion model of Probabilistic Robotics (table 5.6),
-with the variances of AMCL's / nav2's differential model, applied once per odometry message.
+with the variances of AMCL's / nav2's differential model (``gridmap.motion``, which the
+localiser's model shares), applied once per odometry message.
 
 Each message's true increment (rot1, trans, rot2) is corrupted with Gaussian noise of variance
 
@@ -19,18 +20,10 @@ import math
 import numpy as np
 
 from gridmap import Pose2D, wrap_angle
+from gridmap.motion import MIN_TRANS_FOR_BEARING, odometry_delta, turn_for_noise
 
-# Below this translation [m] the bearing of the step is noise: rot1 = 0, as AMCL and nav2 do.
-MIN_TRANS_FOR_BEARING = 0.01
-
-
-def odometry_delta(previous: Pose2D, current: Pose2D) -> tuple[float, float, float]:
-    """(rot1 [rad], trans [m], rot2 [rad]) that take ``previous`` to ``current``."""
-    dx, dy = current.x - previous.x, current.y - previous.y
-    trans = math.hypot(dx, dy)
-    rot1 = 0.0 if trans < MIN_TRANS_FOR_BEARING else wrap_angle(math.atan2(dy, dx) - previous.theta)
-    rot2 = wrap_angle(current.theta - previous.theta - rot1)
-    return rot1, trans, rot2
+__all__ = ["MIN_TRANS_FOR_BEARING", "Odometry", "apply_delta", "motion_sigmas", "noisy_step",
+           "odometry_delta"]
 
 
 def motion_sigmas(delta, alphas) -> np.ndarray:
@@ -38,8 +31,12 @@ def motion_sigmas(delta, alphas) -> np.ndarray:
     step (rot1 near pi) counts as a small turn, as in AMCL."""
     rot1, trans, rot2 = delta
     a1, a2, a3, a4 = alphas
-    r1 = min(abs(wrap_angle(rot1)), abs(wrap_angle(rot1 - math.pi)))
-    r2 = min(abs(wrap_angle(rot2)), abs(wrap_angle(rot2 - math.pi)))
+    r1, r2 = turn_for_noise(rot1), turn_for_noise(rot2)
+    # The same variances as localization.motion.motion_sigmas, but the translation's sums its
+    # turns before scaling them (alpha4 * (r1^2 + r2^2)) where the filter's scales each
+    # (alpha4 * r1^2 + alpha4 * r2^2). The two round differently in the last bit in about one
+    # step in six; each is kept as it was so that the world's odometry and the filter's draws,
+    # and with them every recorded result, stay bit for bit the same.
     return np.sqrt([a1 * r1 * r1 + a2 * trans * trans,
                     a3 * trans * trans + a4 * (r1 * r1 + r2 * r2),
                     a1 * r2 * r2 + a2 * trans * trans])

@@ -9,7 +9,6 @@ session live in ``sim.validate``.
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import MapUpdatingError, Pose2D
+from gridmap.suggest import did_you_mean
 
 
 class ScenarioError(MapUpdatingError, ValueError):
@@ -155,10 +155,8 @@ class Scenario:
         if isinstance(session, str):
             if session in names:
                 return names.index(session)
-            hint = difflib.get_close_matches(session, names, n=1)
-            more = f" (did you mean {hint[0]!r}?)" if hint else ""
-            raise ScenarioError(f"{self.name}: no session named {session!r}{more}; "
-                                f"sessions: {', '.join(names)}")
+            raise ScenarioError(f"{self.name}: no session named {session!r}"
+                                f"{did_you_mean(session, names)}; sessions: {', '.join(names)}")
         i = int(session)
         if not 0 <= i < len(self.sessions):
             raise ScenarioError(f"{self.name}: session index {i} out of range 0..{len(names) - 1}")
@@ -198,8 +196,7 @@ class _Reader:
         allowed = sorted(required | optional)
         for k in node:
             if k not in allowed:
-                hint = difflib.get_close_matches(str(k), allowed, n=1, cutoff=0.5)
-                more = f" (did you mean {hint[0]!r}?)" if hint else \
+                more = did_you_mean(k, allowed, cutoff=0.5) or \
                     f" (valid keys: {', '.join(allowed)})"
                 self.fail(_join(key, k), f"unknown key {k!r}{more}")
         for k in sorted(required):

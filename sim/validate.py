@@ -9,11 +9,12 @@ such).
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable
 
 import numpy as np
+
+from gridmap.suggest import did_you_mean
 
 from . import geometry as geo
 
@@ -75,9 +76,8 @@ def _apply_change(ch, key, movable, static_ids, keys, fail: Fail) -> None:
     if ch.id in static_ids:
         fail(f"{key}.{ch.kind}", f"object {ch.id!r} is static and never moves")
     if ch.id not in movable:
-        hint = difflib.get_close_matches(ch.id, list(movable), n=1)
-        more = f" (did you mean {hint[0]!r}?)" if hint else ""
-        fail(f"{key}.{ch.kind}", f"no movable object {ch.id!r} in the world at this point{more}")
+        fail(f"{key}.{ch.kind}", f"no movable object {ch.id!r} in the world at this point"
+                                 f"{did_you_mean(ch.id, movable)}")
     if ch.kind == "remove":
         del movable[ch.id]
     else:

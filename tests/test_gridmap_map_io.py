@@ -227,3 +227,17 @@ def test_not_yaml_and_not_a_mapping(tmp_path):
 def test_save_refuses_pgm_name(tmp_path):
     with pytest.raises(MapFileError, match="m.pgm"):
         save_map(OccupancyGrid.empty(2, 2, 0.1), tmp_path / "m.pgm")
+
+
+def test_trinary_image_is_the_saved_image_north_up(tmp_path):
+    from gridmap.map_io import PIXEL_FREE, PIXEL_OCCUPIED, PIXEL_UNKNOWN, trinary_image
+
+    data = np.array([[FREE, OCCUPIED, UNKNOWN], [OCCUPIED, FREE, FREE]], np.int8)
+    grid = OccupancyGrid(data, 0.05, (0.0, 0.0))
+    img = trinary_image(grid)
+    # grid row 0 is the lowest y, image row 0 the top
+    assert img.tolist() == [[PIXEL_OCCUPIED, PIXEL_FREE, PIXEL_FREE],
+                            [PIXEL_FREE, PIXEL_OCCUPIED, PIXEL_UNKNOWN]]
+    assert (PIXEL_OCCUPIED, PIXEL_UNKNOWN, PIXEL_FREE) == (0, 205, 254)
+    _, pgm = save_map(grid, tmp_path / "m.yaml")
+    assert pgm.read_bytes().endswith(img.tobytes())

@@ -67,3 +67,9 @@ def test_from_yaml(tmp_path):
         LocalizerConfig.from_yaml(path)
     with pytest.raises(LocalizationError, match="cannot read"):
         LocalizerConfig.from_yaml(tmp_path / "missing.yaml")
+
+
+def test_from_yaml_takes_the_robot_files_section_name_too(tmp_path):
+    path = tmp_path / "loc.yaml"
+    path.write_text("localizer:\n  max_particles: 900\n")
+    assert LocalizerConfig.from_yaml(path) == LocalizerConfig(max_particles=900)

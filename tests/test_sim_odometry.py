@@ -81,3 +81,20 @@ def test_noisy_step_without_noise_is_the_true_increment():
     rel = b.relative_to(a)
     got = out.relative_to(Pose2D(3.0, 3.0, -1.0))
     assert (got.x, got.y, got.theta) == pytest.approx((rel.x, rel.y, rel.theta), abs=1e-12)
+
+
+def test_the_world_and_the_filter_share_one_motion_model():
+    import gridmap.motion
+    import localization.motion
+
+    import sim.odometry
+
+    assert sim.odometry.odometry_delta is localization.motion.odometry_delta \
+        is gridmap.motion.odometry_delta
+    rng = np.random.default_rng(3)
+    alphas = (0.05, 0.01, 0.05, 0.01)
+    for rot1, trans, rot2 in zip(rng.uniform(-4, 4, 200), rng.uniform(0, 1, 200),
+                                 rng.uniform(-4, 4, 200)):
+        world = sim.odometry.motion_sigmas((rot1, trans, rot2), alphas)
+        filt = localization.motion.motion_sigmas((rot1, trans, rot2), alphas)
+        np.testing.assert_allclose(world, filt, rtol=1e-14)   # equal but for the last bit

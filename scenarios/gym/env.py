@@ -12,12 +12,12 @@ import numpy as np
 from gymnasium import spaces
 
 from gridmap import OccupancyGrid, Pose2D
+from gridmap.map_io import trinary_image
 
 from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
 from ..session import UpdateSession, session_seeds
 
 ENV_ID = "WarehouseMapUpdate-v0"
-PGM_OCCUPIED, PGM_UNKNOWN, PGM_FREE = 0, 205, 254   # map_server's trinary image values
 
 
 class WarehouseMapUpdateEnv(gym.Env):
@@ -101,7 +101,13 @@ class WarehouseMapUpdateEnv(gym.Env):
     * ``map_observation``: add the map image to the observation.
     * ``reward_fn``: see Rewards. ``lost_distance`` [m] (0.5).
     * ``waypoint_tolerance`` [m] (0.3), ``goal_tolerance`` [m] (0.05): see Episode End.
-    * ``updater_config``, ``localizer_config``, ``pose_check`` (on): as for the runner.
+    * ``config``: the robot software's configuration as ``mapupdate run --config`` reads it,
+      a dict ``{"updater": {...}, "localizer": {...}, "pose_check": {...}}`` (each section
+      optional; keys the fields of ``UpdaterConfig``, ``LocalizerConfig``,
+      ``PoseCheckConfig``), a YAML path or a ``scenarios.robot_config.RobotConfig``. An unknown
+      section or key is refused (``ConfigError``) with the nearest valid name.
+    * ``updater_config``, ``localizer_config``: as for the runner (not beside the same section
+      of ``config``); ``pose_check`` (on): whether the pose check runs.
     * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
 
     ## Version History
@@ -125,9 +131,12 @@ class WarehouseMapUpdateEnv(gym.Env):
                  map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
                  waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
                  updater_config=None, localizer_config=None, pose_check: bool = True,
-                 render_mode: str | None = None, render_scale: int = 2):
+                 config=None, render_mode: str | None = None, render_scale: int = 2):
         import sim
 
+        from ..robot_config import load_robot_config
+
+        robot = load_robot_config(config, source="config")
         self.scenario = _load_scenario(scenario, quick)
         self.session_index = self.scenario.session_index(session)
         if self.scenario.sessions[self.session_index].mapping:
@@ -153,8 +162,9 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.lost_distance = float(lost_distance)
         self.waypoint_tolerance, self.goal_tolerance = float(waypoint_tolerance), \
             float(goal_tolerance)
-        self._updater_config, self._localizer_config = updater_config, localizer_config
-        self._pose_check = bool(pose_check)
+        self._updater_config = _given_once("updater", updater_config, robot.updater)
+        self._localizer_config = _given_once("localizer", localizer_config, robot.localizer)
+        self._pose_check, self._pose_check_config = bool(pose_check), robot.pose_check
         self._route = np.asarray(self.scenario.sessions[self.session_index].route, np.float64)
         self.action_space, self.observation_space = self._spaces()
         self.world = None
@@ -201,7 +211,8 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.world = sim.World(scn, i, seeds[i]["world"])
         self.session = UpdateSession(scn, i, self.world, reference, initial,
                                      seeds[i]["localizer"], self._updater_config,
-                                     self._localizer_config, pose_check=self._pose_check)
+                                     self._localizer_config, pose_check=self._pose_check,
+                                     pose_check_config=self._pose_check_config)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
         self._next_waypoint = 0
@@ -281,11 +292,7 @@ class WarehouseMapUpdateEnv(gym.Env):
         obs["odometry"] = self._pose_obs(self.world.odom_pose)
         obs["estimate"] = self._pose_obs(self.session.estimate())
         if self._map_observation:
-            d = self.session.updated_map.data[::-1]
-            img = np.full(d.shape, PGM_UNKNOWN, np.uint8)
-            img[d == 0] = PGM_FREE
-            img[d == 100] = PGM_OCCUPIED
-            obs["map"] = img
+            obs["map"] = trinary_image(self.session.updated_map)
         return obs
 
     def _info(self, scans: int) -> dict:
@@ -307,6 +314,15 @@ class WarehouseMapUpdateEnv(gym.Env):
             "waypoints_reached": int(self._next_waypoint),
             "seed": self._seed,
         }
+
+
+def _given_once(section: str, argument, from_config):
+    if argument is not None and from_config is not None:
+        from ..robot_config import ConfigError
+
+        raise ConfigError(f"the {section} configuration is given twice: as {section}_config= "
+                          f"and as config['{section}']")
+    return from_config if argument is None else argument
 
 
 def _load_scenario(scenario, quick: bool):

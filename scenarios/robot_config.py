@@ -1,0 +1,116 @@
+"""The robot software's configuration in one file: the updater, the localiser and the pose check.
+
+    updater:                 # keys of updater.UpdaterConfig
+      threshold: 8
+    localizer:               # keys of localization.LocalizerConfig
+      max_particles: 3000
+    pose_check:              # keys of localization.confidence.PoseCheckConfig
+      slack_cells: 1
+
+``mapupdate run --config FILE`` and ``mapupdate update --config FILE`` read it, the gymnasium
+environment takes the same as a dict (``config=``) and a run's checkpoint reads its recorded
+configurations back through it. Every section is optional; a section left out (or empty) leaves
+its component as the caller would have it without a file. A section given is the whole
+configuration of its component: the keys left out take that dataclass's defaults (for the
+localiser nav2's, alpha1..alpha4 = 0.2, not the robot's odometry noise that ``mapupdate run``
+gives it without a ``localizer`` section). Unknown sections and keys are refused with the
+nearest valid name before anything runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from gridmap import MapUpdatingError
+from gridmap.config import check_keys
+from gridmap.suggest import did_you_mean
+from localization import LocalizerConfig
+from localization.confidence import PoseCheckConfig
+from updater import UpdaterConfig
+
+# The sections of the file and the configuration each holds.
+CLASSES = {"updater": UpdaterConfig, "localizer": LocalizerConfig, "pose_check": PoseCheckConfig}
+SECTIONS = tuple(CLASSES)
+
+
+class ConfigError(MapUpdatingError, ValueError):
+    """A configuration file or mapping that cannot be used; the message names the file, the
+    section and the key."""
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """One configuration per component; None where none was given (the caller's default)."""
+
+    updater: UpdaterConfig | None = None
+    localizer: LocalizerConfig | None = None
+    pose_check: PoseCheckConfig | None = None
+
+    def to_dict(self) -> dict:
+        """The sections given, as ``load_robot_config`` takes them."""
+        return {name: getattr(self, name).to_dict() for name in SECTIONS
+                if getattr(self, name) is not None}
+
+
+def load_robot_config(given, source: str | None = None) -> RobotConfig:
+    """A ``RobotConfig`` from a YAML file's path, a mapping of sections, a ``RobotConfig`` (as
+    it is) or None (nothing given). ``source`` names the origin in errors (default: the path,
+    or "config"). Raises ``ConfigError`` for an unreadable file, an unknown section or key, and
+    the component's own error (a ``MapUpdatingError``) for a bad value."""
+    if given is None or isinstance(given, RobotConfig):
+        return given or RobotConfig()
+    if isinstance(given, (str, Path)):
+        source = source or str(given)
+        given = _read_yaml(Path(given))
+    source = source or "config"
+    if given is None:
+        return RobotConfig()      # an empty file
+    if not isinstance(given, dict):
+        raise ConfigError(f"{source}: expected a mapping of sections ({', '.join(SECTIONS)}), "
+                          f"got {type(given).__name__}")
+    for name in given:
+        if name not in SECTIONS:
+            raise ConfigError(f"{source}: unknown section '{name}'{_section_hint(name)}")
+    # an empty section (YAML "updater:" with nothing under it) is no section
+    return RobotConfig(**{name: section_config(name, given[name], source)
+                          for name in SECTIONS if given.get(name) not in (None, {})})
+
+
+def _section_hint(name) -> str:
+    """The nearest section; or, for a key of a section at the top level (a file of updater keys
+    alone, as ``mapupdate update --config`` once read), the section it belongs under."""
+    near = did_you_mean(name, SECTIONS)
+    if near:
+        return near
+    for section, cls in CLASSES.items():
+        if name in [f.name for f in fields(cls)]:
+            return f" ('{name}' is a key of section '{section}': put it under '{section}:')"
+    return f" (sections: {', '.join(SECTIONS)})"
+
+
+def section_config(name: str, values, source: str, where: str | None = None):
+    """The configuration of section ``name`` (one of ``SECTIONS``) from its mapping of keys;
+    ``where`` says in errors where the mapping is (default: "section '<name>'")."""
+    cls = CLASSES[name]
+    where = where or f"section '{name}'"
+    if not isinstance(values, dict):
+        raise ConfigError(f"{source}: {where} must be a mapping of keys, got "
+                          f"{type(values).__name__}")
+    check_keys(values, [f.name for f in fields(cls)], ConfigError, source, where)
+    return cls.from_dict(values, source=f"{source}, {where}")
+
+
+def _read_yaml(path: Path):
+    import yaml
+
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: configuration file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{path}: cannot read the configuration ({e})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None

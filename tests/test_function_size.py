@@ -1,0 +1,21 @@
+"""Functions stay short enough to read as named steps: none over 60 lines, from ``def`` to the
+end of its body, in every package but the updater."""
+
+import ast
+import pathlib
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGES = ("gridmap", "sim", "localization", "evaluation", "robotlogs", "scenarios")
+MAX_LINES = 60
+
+
+def test_no_function_is_longer_than_sixty_lines():
+    long = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > MAX_LINES:
+                        long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({n})")
+    assert long == []

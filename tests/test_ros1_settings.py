@@ -27,7 +27,7 @@ def test_defaults_are_rosy_and_sections_reach_the_configs():
 @pytest.mark.parametrize("params, words", [
     ({"updater": {"treshold": 5}}, ["unknown key 'treshold'", "did you mean 'threshold'"]),
     ({"pose_check": {"max_gian": 0.1}}, ["unknown key 'max_gian'", "'max_gain'"]),
-    ({"map_frme": "world"}, ["unknown parameter '~map_frme'", "'~map_frame'"]),
+    ({"map_frme": "world"}, ["unknown parameter '~map_frme'", "'map_frame'"]),
     ({"publish_period": -1.0}, ["'~publish_period'", "[0.01, 3600]"]),
     ({"publish_period": "fast"}, ["'~publish_period'"]),
     ({"queue_size": 0}, ["'~queue_size'"]),

@@ -331,7 +331,9 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
 
     r = _ros()
     rospy = r["rospy"]
-    base = _config_sections(config_path) if config_path is not None else {}
+    from ..robot_config import load_robot_config
+
+    base = load_robot_config(config_path)          # refused before anything starts
     reference = load_map(map_path) if map_path is not None else None
     rospy.init_node("map_updater", argv=argv)
     settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
@@ -341,21 +343,3 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
     rospy.loginfo(f"map_updater: ready ({source}; scans on {', '.join(settings.scan_topics)})")
     rospy.spin()
     return 0
-
-
-def _config_sections(path) -> dict:
-    import yaml
-
-    from .settings import SECTIONS, NodeSettingsError, did_you_mean
-
-    try:
-        values = yaml.safe_load(Path(path).read_text()) or {}
-    except (OSError, yaml.YAMLError) as e:
-        raise NodeSettingsError(f"{path}: cannot read the configuration: {e}") from None
-    if not isinstance(values, dict):
-        raise NodeSettingsError(f"{path}: expected sections {', '.join(SECTIONS)}")
-    for key in values:
-        if key not in SECTIONS:
-            raise NodeSettingsError(f"{path}: unknown section '{key}'"
-                                    f"{did_you_mean(key, SECTIONS).replace('~', '')}")
-    return values

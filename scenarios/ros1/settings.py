@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, fields, replace
 
 from gridmap import MapUpdatingError
+from gridmap.suggest import did_you_mean
 
 
 class NodeSettingsError(MapUpdatingError, ValueError):
@@ -55,24 +56,15 @@ class NodeSettings:
                                     f"{self.use_pose_check!r}")
 
 
-SECTIONS = ("updater", "pose_check", "localizer")
-
-
-def did_you_mean(name, choices) -> str:
-    import difflib
-
-    near = difflib.get_close_matches(str(name), list(choices), n=1)
-    return f" (did you mean '~{near[0]}'?)" if near else ""
-
-
-def node_settings(params: dict, base: dict | None = None):
+def node_settings(params: dict, base=None):
     """(NodeSettings, UpdaterConfig, PoseCheckConfig) from the node's private parameters
-    ``params`` laid over ``base`` (a config file's sections, already read). The localiser's
-    section is accepted, for a file shared with ``mapupdate update``, and not used: the node
-    takes its poses from tf."""
+    ``params`` laid key by key over ``base`` (a ``scenarios.robot_config.RobotConfig`` from the
+    ``--config`` file, or None). A ``localizer`` section is accepted, for a file shared with
+    ``mapupdate update``, and not used: the node takes its poses from tf."""
     from localization.confidence import PoseCheckConfig
-    from gridmap.config import config_from_dict
     from updater import UpdaterConfig
+
+    from ..robot_config import SECTIONS, load_robot_config, section_config
 
     if not isinstance(params, dict):
         raise NodeSettingsError(f"private parameters must be a mapping, got {params!r}")
@@ -81,25 +73,20 @@ def node_settings(params: dict, base: dict | None = None):
         if key not in own and key not in SECTIONS:
             raise NodeSettingsError(f"unknown parameter '~{key}'"
                                     f"{did_you_mean(key, own + list(SECTIONS))}")
-    base = base or {}
-    sections = {}
-    for name in ("updater", "pose_check"):
-        merged = dict(base.get(name) or {})
-        given = params.get(name, {})
-        if not isinstance(given, dict):
+    given = load_robot_config(base).to_dict()
+    configs = {}
+    for name, default in (("updater", UpdaterConfig()), ("pose_check", PoseCheckConfig())):
+        merged = given.get(name, default.to_dict())
+        extra = params.get(name, {})
+        if not isinstance(extra, dict):
             raise NodeSettingsError(f"parameter '~{name}' must be a mapping of keys, got "
-                                    f"{given!r}")
-        merged.update(given)
-        sections[name] = merged
-    updater = config_from_dict(UpdaterConfig, sections["updater"], NodeSettingsError,
-                               "parameter ~updater")
-    pose_check = config_from_dict(PoseCheckConfig, sections["pose_check"], NodeSettingsError,
-                                  "parameter ~pose_check")
+                                    f"{extra!r}")
+        configs[name] = section_config(name, {**merged, **extra}, "node parameters",
+                                       where=f"'~{name}'")
     mine = {k: v for k, v in params.items() if k in own}
-    if isinstance(mine.get("scan_topics"), str):
-        mine["scan_topics"] = (mine["scan_topics"],)
-    elif isinstance(mine.get("scan_topics"), list):
-        mine["scan_topics"] = tuple(mine["scan_topics"])
+    if isinstance(mine.get("scan_topics"), (str, list)):
+        topics = mine["scan_topics"]
+        mine["scan_topics"] = (topics,) if isinstance(topics, str) else tuple(topics)
     if isinstance(mine.get("publish_period"), int) and not isinstance(mine["publish_period"], bool):
         mine["publish_period"] = float(mine["publish_period"])
-    return replace(NodeSettings(), **mine), updater, pose_check
+    return replace(NodeSettings(), **mine), configs["updater"], configs["pose_check"]

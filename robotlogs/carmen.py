@@ -17,13 +17,21 @@ Read here (every line ends ``timestamp [host logger_timestamp]``; the timestamp 
 
 Other CARMEN messages (``PARAM``, ``SYNC``, ``NEFF``, ``RAWLASER1`` ...) and ``#`` comments are
 counted and left out. A malformed line (truncated, a beam count that disagrees with the line, a
-field that is not a number, an unknown message) raises :class:`LogError` naming the line with
-``strict=True``; by default it is skipped and counted in :class:`ReadStats`.
+pose or timestamp that is not a finite number, an unknown message) raises :class:`LogError`
+naming the line with ``strict=True``; by default it is skipped and counted in
+:class:`ReadStats`. A bad range (NaN, negative) is not a bad line: as in a ROS LaserScan it is
+an invalid beam (NaN in the scan), the line's other beams are kept, and such ranges are counted
+(``ReadStats.invalid_ranges``). Readings below 1 cm (0.0 is "no valid return" in the SENA
+logs) are invalid beams too, being below the scan's ``range_min``.
+
+A file that starts with gzip's magic bytes (``killian.clf.gz``) is read through gzip.
 """
 
 from __future__ import annotations
 
+import gzip
 import math
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +47,7 @@ from .records import LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRe
 FLASER_NO_RETURN = 81.83
 # Readings below 1 cm are the lidar's error codes (dazzle, no measurement), not obstacles.
 RANGE_MIN = 0.01
+GZIP_MAGIC = b"\x1f\x8b"
 
 OLD_LASERS = {"FLASER": "front_laser", "RLASER": "rear_laser"}
 ROBOT_LASERS = {"ROBOTLASER1": "laser1", "ROBOTLASER2": "laser2"}
@@ -86,17 +95,30 @@ def read_carmen(path, *, strict: bool = False,
     """
     path = Path(path)
     try:
-        with path.open("r", encoding="utf-8", errors="replace") as f:
+        with open_text(path) as f:
             log = parse_carmen(f, source=str(path), strict=strict,
                                flaser_no_return=flaser_no_return)
     except (IsADirectoryError, FileNotFoundError, PermissionError):
         raise
-    except OSError as e:
+    except (OSError, EOFError, zlib.error) as e:     # gzip's errors for a damaged archive
         raise LogError(f"{path}: cannot read: {e}") from None
     if not log.records:
         raise LogError(f"{path}: no usable CARMEN line (laser, ODOM or TRUEPOS); "
                        f"{log.stats.summary()}")
     return log
+
+
+def is_gzip(path) -> bool:
+    """True when the file at ``path`` starts with gzip's magic bytes."""
+    with Path(path).open("rb") as f:
+        return f.read(2) == GZIP_MAGIC
+
+
+def open_text(path):
+    """The log at ``path`` as text lines, through gzip when it is compressed."""
+    if is_gzip(path):
+        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
+    return Path(path).open("r", encoding="utf-8", errors="replace")
 
 
 def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool = False,
@@ -117,8 +139,10 @@ def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool 
             continue
         if record is None:
             log.stats.ignored[words[0]] += 1
-        else:
-            log.records.append(record)
+            continue
+        if isinstance(record, ScanRecord):
+            log.stats.count_invalid_ranges(record.scan.ranges)
+        log.records.append(record)
     log.records.sort(key=lambda r: r.time)
     return log
 
@@ -152,17 +176,15 @@ def _old_laser(words: list[str], no_return: float) -> ScanRecord:
     n = _count(words, 1, name)
     fixed = 6 + 1  # two poses and the timestamp after the ranges
     _check_length(words, 2 + n + fixed, name, f"{n} ranges")
-    ranges = _numbers(words, 2, 2 + n, f"{name} range")
+    r = _ranges(words, 2, 2 + n, name)
     v = _numbers(words, 2 + n, 2 + n + fixed, f"{name} pose or timestamp")
     _check_trailing(words, 2 + n + fixed)
     if n > 0 and n % 2 == 1:
         increment = math.pi / max(n - 1, 1)
     else:
         increment = math.pi / max(n, 1)
-    r = np.asarray(ranges, np.float64)
-    if np.any(r < 0):
-        raise _LineProblem("bad value", f"{name} has a negative range")
-    r[r >= no_return - 1e-6] = np.inf
+    with np.errstate(invalid="ignore"):
+        r[r >= no_return - 1e-6] = np.inf
     scan = _scan(r, -math.pi / 2, increment, RANGE_MIN, no_return, v[6], name)
     return ScanRecord(v[6], scan, frame_id=OLD_LASERS[name], topic=name,
                       laser_pose=Pose2D(*v[0:3]),
@@ -178,7 +200,7 @@ def _robot_laser(words: list[str]) -> ScanRecord:
     n = _count(words, 8, name)
     _check_fan(fov, resolution, n, name)
     _check_length(words, 9 + n + 1, name, f"{n} ranges and a remission count")
-    ranges = _numbers(words, 9, 9 + n, f"{name} range")
+    r = _ranges(words, 9, 9 + n, name)
     m = _count(words, 9 + n, f"{name} remission")
     base = 10 + n + m
     fixed = 6 + 5 + 1  # laser pose, robot pose, tv rv safety distances turn axis, timestamp
@@ -187,10 +209,8 @@ def _robot_laser(words: list[str]) -> ScanRecord:
     _check_trailing(words, base + fixed)
     if not (max_range > 0):
         raise _LineProblem("bad value", f"{name} max_range must be positive, got {max_range}")
-    r = np.asarray(ranges, np.float64)
-    if np.any(r < 0):
-        raise _LineProblem("bad value", f"{name} has a negative range")
-    r[r >= max_range] = np.inf
+    with np.errstate(invalid="ignore"):
+        r[r >= max_range] = np.inf
     scan = _scan(r, start, resolution, min(RANGE_MIN, 0.5 * max_range), max_range, v[11], name)
     return ScanRecord(v[11], scan, frame_id=ROBOT_LASERS[name], topic=name,
                       laser_pose=Pose2D(*v[0:3]),
@@ -211,11 +231,35 @@ def _numbers(words: list[str], start: int, stop: int, what: str) -> list[float]:
         except ValueError:
             raise _LineProblem("not a number", f"{words[0]} field {i + 1} ({what}) is not a "
                                                f"number: {words[i][:40]!r}") from None
-        if math.isnan(x) or (math.isinf(x) and "range" not in what):
+        if not math.isfinite(x):
             raise _LineProblem("not a number", f"{words[0]} field {i + 1} ({what}) is not "
                                                f"finite: {words[i][:40]!r}")
         out.append(x)
     return out
+
+
+def _ranges(words: list[str], start: int, stop: int, name: str) -> np.ndarray:
+    """Words [start, stop) as ranges [m]; a word that is not a number spoils the line, but a
+    NaN or negative reading is only an invalid beam (NaN), as in a ROS LaserScan."""
+    if len(words) < stop:
+        raise _LineProblem("truncated", f"{name} line truncated: {len(words)} fields, "
+                                        f"{stop} needed ({name} range)")
+    try:
+        r = np.array([float(w) for w in words[start:stop]], np.float64)
+    except ValueError:
+        bad = next(i for i in range(start, stop) if not _is_float(words[i]))
+        raise _LineProblem("not a number", f"{name} field {bad + 1} ({name} range) is not a "
+                                           f"number: {words[bad][:40]!r}") from None
+    r[~(r >= 0)] = np.nan      # negative, -inf and NaN alike
+    return r
+
+
+def _is_float(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 def _count(words: list[str], i: int, what: str) -> int:

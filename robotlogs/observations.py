@@ -13,14 +13,20 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from gridmap import Pose2D, Scan
 
-from .carmen import read_carmen
+from .carmen import GZIP_MAGIC, read_carmen
 from .frames import PoseTimeline, TransformTree
 from .records import LogError, OdomRecord, PoseRecord, ReadStats, ScanRecord, TransformRecord
 from .rosbag import bag_topics, read_bag, resolve_topics, scan_count
 
 FORMATS = ("carmen", "ros1", "ros2")
+# How far laser-to-odometry offsets may spread and still be one fixed mount: logs print poses
+# to a micrometre or so, a localisation's corrections move by centimetres.
+FIXED_MOUNT_M = 1e-3
+FIXED_MOUNT_RAD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -57,9 +63,23 @@ def detect_format(path) -> str:
         return "ros2"
     if p.suffix == ".bag":
         raise LogError(f"{p}: not a ROS 1 bag (no '#ROSBAG' header)")
+    if head.startswith(GZIP_MAGIC):
+        head = _gunzipped_head(p)
     if b"\x00" in head or not _is_text(head):
         raise LogError(f"{p}: neither a ROS bag nor a CARMEN text log")
     return "carmen"
+
+
+def _gunzipped_head(path: Path) -> bytes:
+    """The first 4 KB of a gzip file's content (a compressed CARMEN log, as killian.clf.gz)."""
+    import gzip
+    import zlib
+
+    try:
+        with gzip.open(path, "rb") as f:
+            return f.read(4096)
+    except (OSError, EOFError, zlib.error) as e:
+        raise LogError(f"{path}: a damaged gzip file: {e}") from None
 
 
 def _is_text(head: bytes) -> bool:
@@ -82,9 +102,7 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
     """
     log = read_carmen(path, strict=strict)
     if stats is not None:
-        stats.skipped.update(log.stats.skipped)
-        stats.ignored.update(log.stats.ignored)
-        stats.problems.extend(log.stats.problems)
+        stats.merge(log.stats)
     truth = PoseTimeline()
     odom = PoseTimeline()
     for r in log.records:
@@ -104,9 +122,25 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
         recorded = None if r.laser_pose is None else r.laser_pose.compose(mount.inverse())
         out.append(Observation(r.time, r.scan, mount, robot_odom, recorded, truth.at(r.time),
                                sensor=r.laser_pose))
-    has = {"recorded": any(o.sensor is not None for o in out),
+    recorded = any(o.sensor is not None for o in out)
+    has = {"recorded": recorded, "map_frame": recorded and not laser_poses_are_odometry(log),
            "odometry": any(o.odom is not None for o in out), "truth": len(truth) > 0}
     return out, has
+
+
+def laser_poses_are_odometry(log) -> bool:
+    """True when every laser line's laser pose is its odometry pose moved by one fixed mount
+    (zero included): the log then has one stream of poses, which serves as its odometry, and
+    nothing says it is in the frame of a map. A raw log is so (CARMEN's logger writes the
+    odometry carried to the laser: sena.odom.log), and so is a corrected log that wrote its
+    poses in both places (intel.gfs.log, killian.clf.gz). Laser poses that differ from the
+    odometry by a varying offset are a localisation's, beside the raw odometry."""
+    mounts = np.array([r.laser_pose.relative_to(r.odom_pose).as_array() for r in log.scans()
+                       if r.laser_pose is not None and r.odom_pose is not None])
+    if mounts.size == 0:
+        return False
+    return bool(np.ptp(mounts[:, :2], axis=0).max() <= FIXED_MOUNT_M
+                and np.ptp(np.unwrap(mounts[:, 2])) <= FIXED_MOUNT_RAD)
 
 
 # --- observations from a bag -------------------------------------------------------------------
@@ -204,8 +238,10 @@ def _mount(poses: BagPoses, r: ScanRecord, laser_mount) -> Pose2D:
 @dataclass
 class LogObservations:
     """What ``log_observations`` found: the observations (a list, or a generator over a bag's
-    scans), their number, the format, what the log offers (``has``: "recorded", "odometry",
-    "truth") and what the readers skipped (``stats``)."""
+    scans), their number, the format, what the log offers and what the readers skipped
+    (``stats``). ``has``: "recorded" (poses the log gives for the scans, taken to be in the
+    map frame), "map_frame" (they are a localisation's, apart from the odometry: see
+    ``laser_poses_are_odometry``; a localiser may start at them), "odometry", "truth"."""
 
     observations: Iterable[Observation]
     total: int
@@ -230,8 +266,8 @@ def log_observations(path, *, log_format: str | None = None, strict: bool = Fals
                       truth_topic=truth_topic, strict=strict, stats=stats)
     observations = bag_observations(path, poses, scan_topics=scan_topics,
                                     laser_mount=laser_mount, strict=strict, stats=stats)
-    has = {"recorded": poses.tree.parent.get(poses.odom_frame) is not None
-           or len(poses.amcl) > 0,
+    recorded = poses.tree.parent.get(poses.odom_frame) is not None or len(poses.amcl) > 0
+    has = {"recorded": recorded, "map_frame": recorded,
            "odometry": poses.tree.parent.get(poses.base_frame) is not None,
            "truth": len(poses.truth) > 0}
     return LogObservations(observations, scan_count(path, scan_topics), fmt, has, stats)

@@ -84,11 +84,32 @@ class ReadStats:
     skipped: Counter = field(default_factory=Counter)
     ignored: Counter = field(default_factory=Counter)  # known, well-formed, not used
     problems: list[str] = field(default_factory=list)
+    first: dict = field(default_factory=dict)   # kind -> the first message of that kind
+    invalid_ranges: int = 0          # NaN or negative readings kept as invalid beams ...
+    scans_with_invalid_ranges: int = 0   # ... in this many scans
 
     def skip(self, kind: str, message: str) -> None:
         self.skipped[kind] += 1
+        self.first.setdefault(kind, message)
         if len(self.problems) < MAX_PROBLEMS:
             self.problems.append(message)
+
+    def count_invalid_ranges(self, ranges: np.ndarray) -> None:
+        """Count a kept scan's invalid readings: NaN or negative."""
+        bad = int(np.count_nonzero(~(ranges >= 0)))
+        if bad:
+            self.invalid_ranges += bad
+            self.scans_with_invalid_ranges += 1
+
+    def merge(self, other: ReadStats) -> None:
+        """Add ``other``'s counts (a reader's own stats into the caller's)."""
+        self.skipped.update(other.skipped)
+        self.ignored.update(other.ignored)
+        self.problems.extend(other.problems[:max(MAX_PROBLEMS - len(self.problems), 0)])
+        for kind, message in other.first.items():
+            self.first.setdefault(kind, message)
+        self.invalid_ranges += other.invalid_ranges
+        self.scans_with_invalid_ranges += other.scans_with_invalid_ranges
 
     @property
     def total_skipped(self) -> int:
@@ -102,6 +123,19 @@ class ReadStats:
         first = f"; first: {self.problems[0]}" if self.problems else ""
         return f"skipped {self.total_skipped} ({kinds}){first}"
 
+    def lines(self) -> list[str]:
+        """What was skipped, one line per kind (with the first message of that kind), and the
+        invalid readings kept; empty when nothing was."""
+        out = []
+        for kind, n in self.skipped.most_common():
+            first = self.first.get(kind, "")
+            out.append(f"skipped {n} ({kind})" + (f"; first: {first}" if first else ""))
+        if self.invalid_ranges:
+            out.append(f"kept {self.scans_with_invalid_ranges} scans with "
+                       f"{self.invalid_ranges} invalid ranges (NaN or negative) as invalid beams")
+        return out
+
     def as_dict(self) -> dict:
         return {"skipped": dict(self.skipped), "ignored": dict(self.ignored),
-                "problems": list(self.problems)}
+                "problems": list(self.problems), "invalid_ranges": self.invalid_ranges,
+                "scans_with_invalid_ranges": self.scans_with_invalid_ranges}

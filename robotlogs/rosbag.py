@@ -162,11 +162,15 @@ def read_bag(path, *, scan_topics=None, odom_topic=None, pose_topic=None, truth_
                 records = list(_records(msg, conn.msgtype, conn.topic, wanted[conn.topic]))
             except Exception as e:  # noqa: BLE001 - any decoding failure is the message's fault
                 where = f"{path}: topic {conn.topic} at {stamp_ns * 1e-9:.9f} s"
+                bad = "not finite" if isinstance(e, NotFinite) else "cannot decode"
                 if strict:
-                    raise LogError(f"{where}: cannot decode {conn.msgtype}: {_one_line(e)}") \
-                        from None
-                stats.skip(f"bad {conn.topic}", f"{where}: {_one_line(e)}")
+                    raise LogError(f"{where}: {bad} {conn.msgtype}: {_one_line(e)}") from None
+                stats.skip(f"{'not finite' if bad == 'not finite' else 'bad'} {conn.topic}",
+                           f"{where}: {_one_line(e)}")
                 continue
+            for r in records:
+                if isinstance(r, ScanRecord):
+                    stats.count_invalid_ranges(r.scan.ranges)
             yield from records
     finally:
         reader.close()
@@ -181,18 +185,36 @@ def _wanted(topics: BagTopics, kinds) -> dict[str, str]:
 
 
 def _records(msg, msgtype: str, topic: str, kind: str) -> Iterator[Record]:
+    """The records of one message; a pose that is not finite (a faulty odometry driver's NaN)
+    spoils its message, which the caller then skips and counts like any undecodable one."""
     if kind == "scan":
         yield scan_record(msg, topic)
     elif kind == "odom":
-        yield OdomRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), _twist(msg.twist.twist),
-                         msg.header.frame_id, msg.child_frame_id, topic)
+        yield OdomRecord(stamp_seconds(msg.header), _finite(_pose(msg.pose.pose), "pose"),
+                         _twist(msg.twist.twist), msg.header.frame_id, msg.child_frame_id, topic)
     elif kind in ("pose", "truth"):
-        yield _pose_record(msg, msgtype, topic)
+        record = _pose_record(msg, msgtype, topic)
+        _finite(record.pose, "pose")
+        yield record
     else:
-        for tr in msg.transforms:
-            yield TransformRecord(stamp_seconds(tr.header), tr.header.frame_id.lstrip("/"),
-                                  tr.child_frame_id.lstrip("/"), transform_pose(tr.transform),
-                                  static=kind == "tf_static")
+        # all of a tf message or none: a transform of it that is not finite spoils the message
+        records = [TransformRecord(stamp_seconds(tr.header), tr.header.frame_id.lstrip("/"),
+                                   tr.child_frame_id.lstrip("/"),
+                                   _finite(transform_pose(tr.transform),
+                                           f"transform {tr.child_frame_id}"),
+                                   static=kind == "tf_static")
+                   for tr in msg.transforms]
+        yield from records
+
+
+class NotFinite(LogError):
+    """A message whose pose is NaN or infinite."""
+
+
+def _finite(pose: Pose2D, what: str) -> Pose2D:
+    if not pose.is_finite():
+        raise NotFinite(f"{what} is not finite ({pose.x}, {pose.y}, {pose.theta})")
+    return pose
 
 
 def scan_record(msg, topic: str) -> ScanRecord:

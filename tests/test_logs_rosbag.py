@@ -193,3 +193,23 @@ def test_whole_nanosecond_times_read_back_bit_for_bit(tmp_path, fmt):
     path = tmp_path / ("t.bag" if fmt == "ros1" else "t")
     back = list(read_bag(write_bag(path, records, fmt), kinds=("odom",)))
     assert [r.time for r in back] == times
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_odometry_message_that_is_not_finite_is_skipped_and_counted(tmp_path, bad):
+    """One NaN or inf odometry message (a faulty driver) is dropped like an undecodable one;
+    the bag's other messages read as before. tf and pose messages likewise."""
+    records = session_records(n=6)
+    records.append(OdomRecord(1.25, Pose2D(bad, 0.0, 0.0)))
+    records.append(TransformRecord(1.25, "odom", "base_link", Pose2D(0.0, bad, 0.0)))
+    records.append(PoseRecord(1.25, Pose2D(bad, 1.0, 0.0)))
+    path = write_bag(tmp_path / "nan", records, "ros2")
+    stats = ReadStats()
+    got = list(read_bag(path, stats=stats))
+    assert len(got) == len(records) - 3
+    assert all(r.pose.is_finite() for r in got if hasattr(r, "pose"))
+    assert stats.skipped == {"not finite /odom": 1, "not finite /tf": 1,
+                             "not finite /amcl_pose": 1}
+    assert "pose is not finite" in stats.first["not finite /odom"]
+    with pytest.raises(LogError, match=r"topic /odom at 1.250000000 s: not finite"):
+        list(read_bag(path, strict=True))

@@ -195,6 +195,12 @@ class PoseCheck:
         return PoseFit(float(score[0]), float(score[0] - score[best]),
                        Pose2D(float(dx), float(dy), float(dth)), beams.count)
 
+    def agrees(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> bool:
+        """True unless a pose of the search grids fits the scan clearly better than
+        ``robot_pose`` (the fit half of ``check``, without the hold and the covariance)."""
+        f = self.fit(scan, robot_pose, sensor_mount)
+        return f is None or not (f.gain > self.config.max_gain and self._far(f.correction))
+
     def refine(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
                cov: np.ndarray | None = None) -> str | Pose2D:
         """The check, and for a trusted pose the pose that fits the scan best near it: a

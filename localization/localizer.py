@@ -92,12 +92,21 @@ class MonteCarloLocalizer:
         particles[:, 2] = (particles[:, 2] + math.pi) % (2 * math.pi) - math.pi
         self._start(particles, pose, cov)
 
-    def initialize_global(self) -> None:
-        """Start from max_particles particles uniform over the free cells, headings uniform."""
+    def initialize_global(self, particles: int | None = None) -> None:
+        """Start from ``particles`` particles (default max_particles, as AMCL) uniform over the
+        free cells, headings uniform. A large place needs more than a tracking filter does;
+        KLD-sampling brings the count down as the cloud converges."""
         if self._free_cells.size == 0:
             raise LocalizationError("global initialisation needs a map with free cells")
-        particles = self.random_free_poses(self.config.max_particles)
-        self._start(particles, None, None)
+        n = self.config.max_particles if particles is None else particles
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise LocalizationError(f"particles must be an integer >= 1, got {particles!r}")
+        self._start(self.random_free_poses(int(n)), None, None)
+
+    @property
+    def free_area(self) -> float:
+        """[m^2] the free space of the map, where a global start spreads its particles."""
+        return float(self._free_cells.size * self._field.grid.resolution ** 2)
 
     def random_free_poses(self, n: int) -> np.ndarray:
         """``n`` poses (n, 3) uniform over the map's free cells (anywhere within a cell)."""

@@ -86,22 +86,33 @@ def _rerun_recorder(args):
 
 
 def _cmd_update(args) -> int:
-    from .replay import update_from_log
+    from . import replay
     from .robot_config import load_robot_config
 
     config = load_robot_config(args.config)     # refused before the log is read
-    summary = update_from_log(args.map, args.log, args.out, args.state,
-                              pose_source=args.poses, updater_config=config.updater,
-                              localizer_config=config.localizer,
-                              pose_check_config=config.pose_check,
-                              progress=not args.no_progress, log_format=args.format,
-                              scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
-                              pose_topic=args.pose_topic, pose_check=args.pose_check)
-    print(f"wrote {args.out}: {summary['scans_processed']} of {summary['scans']} scans processed, "
-          f"{summary['scans_dropped_as_lost']} dropped as lost, "
-          f"{summary['scans_refused_by_pose_check']} refused by the pose check, "
-          f"{summary['cells_freed']} cells "
-          f"freed, {summary['cells_occupied']} occupied (poses: {summary['pose_source']})")
+    start = None if args.initial_pose is None else replay.parse_pose(args.initial_pose)
+    summary = replay.update_from_log(
+        args.map, args.log, args.out, args.state, pose_source=args.poses,
+        updater_config=config.updater, localizer_config=config.localizer,
+        pose_check_config=config.pose_check, progress=not args.no_progress,
+        log_format=args.format, scan_topics=args.scan_topic or None,
+        odom_topic=args.odom_topic, pose_topic=args.pose_topic, pose_check=args.pose_check,
+        strict=args.strict, initial_pose=start, trajectory_path=args.trajectory,
+        smooth_window=args.smooth_poses)
+    summary.setdefault("out", str(args.out))
+    print("\n".join(replay.summary_lines(summary)))
+    return 0
+
+
+def _cmd_map(args) -> int:
+    from . import logmap
+
+    summary = logmap.map_from_log(args.log, args.out, resolution=args.resolution,
+                                  pose_source=args.poses, log_format=args.format,
+                                  strict=args.strict, scan_topics=args.scan_topic or None,
+                                  odom_topic=args.odom_topic, pose_topic=args.pose_topic,
+                                  progress=not args.no_progress)
+    print("\n".join(logmap.summary_lines(summary)))
     return 0
 
 
@@ -121,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_compare(sub)
     _add_update(sub)
+    _add_map(sub)
     _add_render(sub)
     _add_ros1(sub)
     return p
@@ -184,8 +196,42 @@ def _add_update(sub) -> None:
     upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
                           "covariance) calls unsure (default: off; README, 'Choices')")
+    upd.add_argument("--initial-pose", nargs=3, default=None, metavar=("X", "Y", "YAW"),
+                     help="where the localiser starts, in the map frame [m, m, rad] (default: "
+                          "the log's localisation if it has one, else over the whole map)")
+    upd.add_argument("--trajectory", type=Path, default=None, metavar="OUT.tum",
+                     help="write the robot pose of each scan the update used (TUM, for evo)")
+    upd.add_argument("--strict", action="store_true",
+                     help="refuse a log with a malformed line or message instead of skipping "
+                          "and counting it")
+    upd.add_argument("--smooth-poses", type=float, default=0.0, metavar="SECONDS",
+                     help="smooth a recorded localisation that jitters from scan to scan with "
+                          "the odometry over this window (default 0: off; README)")
     upd.set_defaults(func=_cmd_update)
 
+
+
+def _add_map(sub) -> None:
+    mp = sub.add_parser("map", help="build a first map from a log with corrected poses",
+                        description="Log-odds occupancy mapping, as M1 is built in the "
+                        "simulator, from every scan of a log at the poses it records.")
+    mp.add_argument("--log", type=Path, required=True,
+                    help="ROS 1 bag, ROS 2 bag folder or CARMEN log (also .gz) with corrected "
+                         "poses")
+    mp.add_argument("--out", type=Path, required=True, help="YAML path of the map")
+    mp.add_argument("--resolution", type=float, default=0.05, help="cell size [m] (0.05)")
+    mp.add_argument("--poses", default="recorded", choices=["recorded", "truth"],
+                    help="the log's recorded (corrected) poses, or a simulated log's true "
+                         "ones (default: recorded)")
+    mp.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
+                    help="log format (default: detected)")
+    mp.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
+    mp.add_argument("--odom-topic", default=None)
+    mp.add_argument("--pose-topic", default=None)
+    mp.add_argument("--strict", action="store_true",
+                    help="refuse a log with a malformed line or message")
+    mp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    mp.set_defaults(func=_cmd_map)
 
 
 def _add_ros1(sub) -> None:

@@ -33,6 +33,7 @@ class PipelineCounts:
     scans_dropped_as_lost: int = 0        # classified, then dropped by the lost check
     scans_refused_by_pose_check: int = 0  # the pose check refused their pose
     localizer_updates: int = 0            # scans the localiser ran a filter update on
+    scans_not_tracking: int = 0           # withheld: the localiser was lost or converging
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -41,11 +42,13 @@ class PipelineCounts:
 @dataclass(frozen=True)
 class Step:
     """One ``step``: the robot pose the scan was placed at (map frame, before any refinement by
-    the pose check; None when there was none) and the updater's report (None without an updater
-    or a pose)."""
+    the pose check; None when there was none), the updater's report (None without an updater
+    or a pose, or when the localiser was not tracking) and the sensor pose the updater used
+    (the pose check's refinement when it refined; None when the updater was not asked)."""
 
     robot_pose: Pose2D | None
     report: object | None     # updater.ScanReport
+    sensor_pose: Pose2D | None = None
 
 
 class RobotPipeline:
@@ -56,14 +59,17 @@ class RobotPipeline:
     localiser on M1). ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
-    ``cpu`` holds the process time spent in the localiser and in the updater (pose check
-    included) [s].
+    ``tracking``: a ``localization.tracking.TrackingMonitor``, judging the localiser after each
+    filter update; while it is not tracking, scans are withheld from the updater. ``cpu`` holds
+    the process time spent in the localiser (tracking verdict included) and in the updater
+    (pose check included) [s].
     """
 
-    def __init__(self, updater=None, localizer=None, pose_check=None):
+    def __init__(self, updater=None, localizer=None, pose_check=None, tracking=None):
         self.updater = updater
         self.localizer = localizer
         self.pose_check = pose_check
+        self.tracking = tracking
         self.counts = PipelineCounts()
         self.cpu = {"localizer_s": 0.0, "updater_s": 0.0}
 
@@ -80,14 +86,26 @@ class RobotPipeline:
             return Step(None, None)
         if self.updater is None:
             return Step(robot, None)
+        if self.tracking is not None and self.localizer is not None \
+                and not self.tracking.tracking:
+            self.counts.scans_not_tracking += 1
+            return Step(robot, None)
         t0 = time.process_time()
+        sensor = robot.compose(mount)
+        used = [sensor]
         check = None if self.pose_check is None else partial(
-            self.pose_check.verdict, scan, robot, mount, cov)
-        report = self.updater.process(scan, robot.compose(mount), odometry=odometry,
-                                      pose_check=check)
+            self._verdict, scan, robot, mount, cov, used)
+        report = self.updater.process(scan, sensor, odometry=odometry, pose_check=check)
         self.cpu["updater_s"] += time.process_time() - t0
         self._count(report)
-        return Step(robot, report)
+        return Step(robot, report, used[-1])
+
+    def _verdict(self, scan, robot, mount, cov, used: list):
+        """The pose check's verdict, noting the sensor pose it refines to."""
+        verdict = self.pose_check.verdict(scan, robot, mount, cov)
+        if verdict.sensor_pose is not None:
+            used.append(verdict.sensor_pose)
+        return verdict
 
     def _locate(self, scan, mount, odometry, pose):
         """(robot pose in the map frame, its covariance or None)."""
@@ -96,10 +114,14 @@ class RobotPipeline:
         if odometry is None:
             return None, None
         t0 = time.process_time()
-        self.counts.localizer_updates += bool(self.localizer.update(odometry, scan, mount))
+        updated = bool(self.localizer.update(odometry, scan, mount))
+        self.counts.localizer_updates += updated
         est = self.localizer.estimate()
+        robot = est.pose_at(odometry)
+        if updated and self.tracking is not None:
+            self.tracking.observe(self.localizer, scan, robot, mount)
         self.cpu["localizer_s"] += time.process_time() - t0
-        return est.pose_at(odometry), est.cov
+        return robot, est.cov
 
     def _count(self, report) -> None:
         from updater import ScanStatus

@@ -3,23 +3,32 @@
 The way through: read the log -> the robot's pose at each scan (the recorded localisation, or
 this project's localiser run on odometry and scans) -> sensor pose = robot pose composed with
 the laser mount, once -> updater -> the output map (written atomically) and, on request, the
-updater's state so the next recording continues where this one stopped.
+updater's state so the next recording continues where this one stopped, and the trajectory the
+update used (TUM).
 
 Where the poses come from (``pose_source``):
 
-- ``"recorded"``: a CARMEN log's laser poses (corrected logs carry the SLAM poses); a bag's
-  ``map -> odom`` tf composed with odometry at scan time, or, without that tf, ``/amcl_pose``
-  carried to scan time by odometry (the ``map -> odom`` amcl would have sent).
-- ``"localizer"``: :class:`localization.MonteCarloLocalizer` on the map, fed odometry and scans,
-  started at ``initial_pose`` (default: the first recorded pose, else the first odometry pose).
+- ``"recorded"``: a CARMEN log's laser poses (corrected logs carry the SLAM poses; a raw log's
+  are dead-reckoned); a bag's ``map -> odom`` tf composed with odometry at scan time, or,
+  without that tf, ``/amcl_pose`` carried to scan time by odometry (the ``map -> odom`` amcl
+  would have sent).
+- ``"localizer"``: :class:`localization.MonteCarloLocalizer` on the map, fed odometry and scans.
+  It starts at ``initial_pose`` when one is given; else at the first recorded pose when the log
+  has a localisation apart from its odometry (a bag's ``map -> odom`` or ``/amcl_pose``, a
+  CARMEN log whose laser poses are not its odometry moved by one mount); else over the whole
+  map's free space (global localisation). A :class:`localization.tracking.TrackingMonitor`
+  judges it after every filter update: while it has not settled (after a global start) or has
+  lost track (an odometry jump), its scans change nothing, and one unsure for long is started
+  again over the whole map.
 - ``"truth"``: a bag's true pose topic (simulated sessions), a CARMEN log's ``TRUEPOS``.
-- ``"auto"``: ``"recorded"`` when the log has a localisation, else ``"localizer"``.
+- ``"auto"``: ``"recorded"`` when the log has poses for its scans, else ``"localizer"``.
 """
 
 from __future__ import annotations
 
+import math
 import time as _time
-from functools import partial
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +42,23 @@ POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
 # Where the robot starts when the localiser has only a rough idea: std of x, y [m], yaw [rad].
 INITIAL_STD = (0.25, 0.25, 0.1)
 NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
+# The localiser's configuration when none is given: nav2's, but a filter update every 0.1 m
+# rather than 0.25 m. A scan placed between updates carries the odometry since the last one,
+# and a recording's odometry can lag its scans (on the SENA log by up to 0.2 m at 4 Hz: 0.30 m
+# of error at one scan with updates every 0.25 m, 0.17 m with every 0.1 m); a log replays
+# far faster than it was recorded, so the extra updates cost little.
+LOCALIZER_DEFAULTS = {"update_min_d": 0.1}
+
+
+@dataclass
+class Replay:
+    """What the replay loop gathers besides the pipeline's counters."""
+
+    read: int = 0                                        # observations read from the log
+    times: list = field(default_factory=list)            # [s] of the scans the update used
+    poses: list = field(default_factory=list)            # robot poses (x, y, yaw) it used
+    start: str = ""                                      # how the localiser started
+
 
 # --- the replay --------------------------------------------------------------------------------
 
@@ -43,22 +69,28 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                     laser_mount: Pose2D | None = None, initial_pose: Pose2D | None = None,
                     initial_std=INITIAL_STD, start_time: float | None = None,
                     end_time: float | None = None, seed: int = 0,
-                    pose_check: bool = False, pose_check_config=None) -> dict:
+                    pose_check: bool = False, pose_check_config=None,
+                    trajectory_path=None, tracking_config=None,
+                    smooth_window: float = 0.0) -> dict:
     """Update the map at ``map_path`` with the scans of ``log_path``; write ``out_path``.
 
     With ``state_path``, the updater's state is loaded from it when the file exists (so this
     recording continues the last one) and saved to it at the end. ``start_time`` /
     ``end_time`` [s, log time] limit the scans used. ``pose_check``: scans whose pose the
     scan's own fit to the reference map (and, with the localiser, its covariance) calls unsure
-    change nothing (``localization.confidence.PoseCheck``). Returns a summary (counts, the pose
-    source used, what was skipped, cells changed, wall time).
-    """
-    from gridmap import load_map, save_map
+    change nothing (``localization.confidence.PoseCheck``). ``strict``: a malformed log line or
+    message is an error instead of a counted skip. ``smooth_window`` [s]: recorded poses of a
+    localisation apart from the odometry are smoothed with it over that window
+    (``PoseSmoother``; 0: used as recorded). ``trajectory_path``: the robot pose of each
+    scan the update was given, as it was placed (the pose check's refinement where it refined;
+    scans it refused and scans withheld while the localiser was not tracking are left out), in
+    TUM format. Returns a summary: counts, pose source, what was skipped, how the localiser
+    fared, cells changed, wall time."""
+    from gridmap import load_map
 
     wall0 = _time.perf_counter()
-    if pose_source not in POSE_SOURCES:
-        raise LogError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, "
-                       f"got {pose_source!r}")
+    _check_arguments(pose_source, smooth_window)
+    _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path)
     grid = load_map(map_path)
     found = log_observations(log_path, log_format=log_format, strict=strict,
                              scan_topics=scan_topics, odom_topic=odom_topic,
@@ -66,57 +98,118 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                              laser_mount=laser_mount)
     source = _choose_source(pose_source, found.has, log_path)
     updater, state_loaded = _updater(grid, updater_config, state_path)
+    pipeline = _pipeline(updater, pose_check, pose_check_config)
+    starter = None
+    if source == "localizer":
+        starter = LocalizerStart(grid, localizer_config, initial_pose, initial_std, seed,
+                                 found.has["map_frame"], tracking_config, pose_check_config)
+    smoother = PoseSmoother(smooth_window) if smooth_window > 0 and source == "recorded" \
+        and found.has["map_frame"] else None
+    replay = _replay(pipeline, found, source, starter, (start_time, end_time),
+                     f"updating from {Path(log_path).name}" if progress else None, smoother)
+    _check_placed(pipeline, replay, found, log_path)
+    updated = _save_outputs(updater, replay, out_path, state_path, trajectory_path)
+    c = pipeline.counts
+    return {
+        "log": str(log_path), "format": found.format, "map": str(map_path),
+        "out": str(out_path), "state": None if state_path is None else str(state_path),
+        "state_loaded": state_loaded, "pose_source": source, "scans": replay.read,
+        "scans_used": c.scans - c.scans_without_pose - c.scans_not_tracking,
+        **{k: v for k, v in c.as_dict().items() if k != "scans"},
+        **_changes(grid, updated), "read": found.stats.as_dict(),
+        "read_lines": found.stats.lines(), "tracking": _tracking_summary(pipeline, replay),
+        "trajectory": None if trajectory_path is None else str(trajectory_path),
+        "wall_s": _time.perf_counter() - wall0,
+    }
+
+
+def _check_arguments(pose_source, smooth_window) -> None:
+    if pose_source not in POSE_SOURCES:
+        raise LogError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, "
+                       f"got {pose_source!r}")
+    if isinstance(smooth_window, bool) or not isinstance(smooth_window, (int, float)) \
+            or not 0 <= smooth_window <= 60:
+        raise LogError(f"the smoothing window must be 0 (off) to 60 s, got {smooth_window!r}")
+
+
+def _pipeline(updater, pose_check: bool, pose_check_config) -> RobotPipeline:
     guard = None
     if pose_check:
         from localization.confidence import PoseCheck
 
         guard = PoseCheck(updater.reference_map, pose_check_config)
-    pipeline = RobotPipeline(updater, pose_check=guard)
-    start = partial(_start_localizer, grid, config=localizer_config, initial_pose=initial_pose,
-                    initial_std=initial_std, seed=seed) if source == "localizer" else None
-    n_read = _replay(pipeline, found, source, start, (start_time, end_time),
-                     f"updating from {Path(log_path).name}" if progress else None)
-    c = pipeline.counts
-    if c.scans == c.scans_without_pose:
-        raise LogError(f"{log_path}: no scan could be placed ({n_read} read, "
-                       f"{c.scans_without_pose} without a pose); {found.stats.summary()}")
+    return RobotPipeline(updater, pose_check=guard)
+
+
+def _save_outputs(updater, replay: Replay, out_path, state_path, trajectory_path):
+    """The updated map (returned), and the state and trajectory when asked, each atomically."""
+    from gridmap import save_map
+
     updated = updater.updated_map()
     save_map(updated, out_path)
     if state_path is not None:
         updater.save(state_path)
-    counts = {"scans": n_read, "scans_used": c.scans - c.scans_without_pose,
-              **{k: v for k, v in c.as_dict().items() if k != "scans"}}
-    return {
-        "log": str(log_path), "format": found.format, "map": str(map_path),
-        "out": str(out_path), "state": None if state_path is None else str(state_path),
-        "state_loaded": state_loaded, "pose_source": source, **counts,
-        **_changes(grid, updated), "read": found.stats.as_dict(),
-        "wall_s": _time.perf_counter() - wall0,
-    }
+    if trajectory_path is not None:
+        from .report import write_tum
+
+        write_tum(Path(trajectory_path), np.asarray(replay.times),
+                  np.asarray(replay.poses).reshape(-1, 3))
+    return updated
 
 
-def _replay(pipeline: RobotPipeline, found, source: str, start_localizer, window,
-            progress: str | None) -> int:
+def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
+            progress: str | None, smoother=None) -> Replay:
     """Feed the log's observations within ``window`` (start, end [s], None for open) to the
     pipeline; the localiser, if the poses are to come from one, starts at the first
-    observation with odometry. Returns the number of observations read."""
+    observation with odometry. Returns what the update used."""
     from tqdm import tqdm
 
     first, last = window
-    n_read = 0
+    out = Replay()
     with tqdm(total=found.total, disable=progress is None, unit="scan", dynamic_ncols=True,
               desc=progress, leave=False) as bar:
         for obs in found.observations:
             bar.update(1)
-            n_read += 1
+            out.read += 1
             if (first is not None and obs.time < first) or (last is not None and obs.time > last):
                 continue
-            if start_localizer is not None and pipeline.localizer is None \
-                    and obs.odom is not None:
-                pipeline.localizer = start_localizer(obs)
-            pose, mount = _given_pose(obs, source)
-            pipeline.step(obs.scan, mount, odometry=obs.odom, pose=pose)
-    return n_read
+            if starter is not None and pipeline.localizer is None and obs.odom is not None:
+                pipeline.localizer, pipeline.tracking = starter.start(obs)
+                out.start = starter.how
+            pose, mount = _given_pose(obs, source, smoother)
+            step = pipeline.step(obs.scan, mount, odometry=obs.odom, pose=pose)
+            _note_pose(out, obs, step, mount)
+    return out
+
+
+def _note_pose(out: Replay, obs: Observation, step, mount: Pose2D) -> None:
+    """Record the robot pose the update placed the scan at (refined or not), unless the scan
+    changed nothing because its pose was refused or withheld."""
+    from updater import ScanStatus
+
+    if step.report is None or step.report.status is ScanStatus.REFUSED:
+        return
+    robot = step.sensor_pose.compose(mount.inverse())
+    if mount is NO_MOUNT:            # the log gave the laser's pose: back to the robot's
+        robot = robot.compose(obs.mount.inverse())
+    out.times.append(obs.time)
+    out.poses.append((robot.x, robot.y, robot.theta))
+
+
+def _check_placed(pipeline: RobotPipeline, replay: Replay, found, log_path) -> None:
+    """Refuse a replay that placed no scan at all: every scan without a pose, or a global
+    localisation that never settled (then nothing is written)."""
+    c = pipeline.counts
+    if c.scans and c.scans == c.scans_without_pose:
+        raise LogError(f"{log_path}: no scan could be placed ({replay.read} read, "
+                       f"{c.scans_without_pose} without a pose); {found.stats.summary()}")
+    monitor = pipeline.tracking
+    if monitor is not None and monitor.never_tracked:
+        doubt = monitor.doubt(pipeline.localizer.estimate()) or "its scans fit a pose nearby " \
+                                                                "better"
+        raise LogError(f"{log_path}: the localiser ({replay.start}) never settled on a pose in "
+                       f"the {c.scans} scans ({c.localizer_updates} filter updates; at the end "
+                       f"{doubt}); give the start with --initial-pose X Y YAW")
 
 
 def _choose_source(asked: str, has: dict, log_path) -> str:
@@ -132,10 +225,13 @@ def _choose_source(asked: str, has: dict, log_path) -> str:
     return asked
 
 
-def _given_pose(obs: Observation, source: str) -> tuple[Pose2D | None, Pose2D]:
+def _given_pose(obs: Observation, source: str, smoother=None) -> tuple[Pose2D | None, Pose2D]:
     """(pose, mount): the robot's map-frame pose the log gives (None with the localiser, which
     makes its own) and the laser's mount on it, whose composition, made once, is the laser's
-    pose; a log that gives the laser pose itself gives it as the pose, with no mount."""
+    pose; a log that gives the laser pose itself gives it as the pose, with no mount. With a
+    ``smoother``, recorded poses are smoothed with the odometry (``PoseSmoother``)."""
+    if source == "recorded" and smoother is not None and obs.odom is not None:
+        return smoother(obs.time, obs.recorded, obs.odom), obs.mount
     if source == "recorded" and obs.sensor is not None:
         return obs.sensor, NO_MOUNT
     if source == "recorded":
@@ -145,19 +241,97 @@ def _given_pose(obs: Observation, source: str) -> tuple[Pose2D | None, Pose2D]:
     return None, obs.mount
 
 
-def _start_localizer(grid, obs: Observation, *, config, initial_pose, initial_std, seed):
-    from localization import LocalizerConfig, MonteCarloLocalizer
+class PoseSmoother:
+    """Recorded map-frame poses smoothed with odometry over the last ``window`` seconds.
 
-    if isinstance(config, dict):
-        config = LocalizerConfig.from_dict(config)
-    elif isinstance(config, (str, Path)):
-        config = LocalizerConfig.from_yaml(config)
-    start = initial_pose or obs.recorded or obs.odom
-    if start is None:
-        raise LogError("the localiser needs a starting pose (initial_pose)")
-    loc = MonteCarloLocalizer(grid, config, seed=seed)
-    loc.initialize(start, np.diag(np.square(np.asarray(initial_std, np.float64))))
-    return loc
+    A recorded localisation jitters from scan to scan (a few centimetres, a fraction of a
+    degree: each filter update of amcl moves ``map -> odom`` a little), while wheel odometry is
+    smooth over a few metres. Each recorded pose of the window, carried to the current scan by
+    the odometry since it (``recorded_j (+) (odom_j^-1 (+) odom_k)``), predicts the current pose;
+    their mean (the circular mean for the heading) is the pose used. Only past scans count, so
+    a live robot could do the same; a real correction of the localisation comes through within
+    ``window``. Without odometry at a scan the recorded pose is used as it is."""
+
+    def __init__(self, window: float):
+        self.window = float(window)
+        self._past: list = []          # (time, recorded, odometry)
+
+    def __call__(self, time: float, recorded: Pose2D | None, odom: Pose2D | None):
+        if recorded is None or odom is None or not self.window > 0:
+            return recorded
+        self._past = [p for p in self._past if time - self.window < p[0] <= time]
+        self._past.append((time, recorded, odom))
+        guesses = np.array([r.compose(odom.relative_to(o)).as_array()
+                            for _, r, o in self._past])
+        yaw = math.atan2(np.sin(guesses[:, 2]).mean(), np.cos(guesses[:, 2]).mean())
+        return Pose2D(float(guesses[:, 0].mean()), float(guesses[:, 1].mean()), yaw)
+
+
+class LocalizerStart:
+    """Starts the localiser at the first observation with odometry: at ``initial_pose``, else
+    at the observation's recorded pose when the log's poses are a localisation
+    (``map_frame``), else over the whole map. ``how`` says which, for the summary."""
+
+    def __init__(self, grid, config, initial_pose, initial_std, seed, map_frame,
+                 tracking_config=None, pose_check_config=None):
+        from localization import LocalizerConfig
+
+        if config is None:
+            config = LocalizerConfig(**LOCALIZER_DEFAULTS)
+        elif isinstance(config, dict):
+            config = LocalizerConfig.from_dict(config)
+        elif isinstance(config, (str, Path)):
+            config = LocalizerConfig.from_yaml(config)
+        if initial_pose is not None and not (isinstance(initial_pose, Pose2D)
+                                             and initial_pose.is_finite()):
+            raise LogError(f"the initial pose must be three finite numbers X Y YAW, got "
+                           f"{initial_pose!r}")
+        self.grid, self.config, self.seed = grid, config, seed
+        self.initial_pose, self.initial_std, self.map_frame = initial_pose, initial_std, map_frame
+        self.tracking_config, self.pose_check_config = tracking_config, pose_check_config
+        self.how = ""
+
+    def start(self, obs: Observation):
+        """(localiser, its tracking monitor)."""
+        from localization import MonteCarloLocalizer
+        from localization.tracking import TrackingMonitor
+
+        loc = MonteCarloLocalizer(self.grid, self.config, seed=self.seed)
+        pose = self.initial_pose or (obs.recorded if self.map_frame else None)
+        monitor = TrackingMonitor(self.grid, self.tracking_config, self.pose_check_config,
+                                  converging=pose is None)
+        if pose is None:
+            monitor.start_global(loc, obs.time, "no start given, and the log's poses are "
+                                                "not a localisation in the map")
+            self.how = f"started over the whole map, {loc.particle_count} particles"
+        else:
+            loc.initialize(pose, np.diag(np.square(np.asarray(self.initial_std, np.float64))))
+            self.how = "started at the given pose" if self.initial_pose else \
+                "started at the first recorded pose"
+        return loc, monitor
+
+
+def _tracking_summary(pipeline: RobotPipeline, replay: Replay) -> dict | None:
+    monitor = pipeline.tracking
+    if monitor is None:
+        return None
+    return {"start": replay.start, "state": monitor.state.value, "restarts": monitor.restarts,
+            "events": [{"time": e.time, "state": e.state.value, "reason": e.reason}
+                       for e in monitor.events]}
+
+
+def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -> None:
+    """The trajectory must not land on an input or on another output (the map's YAML and
+    image, the state)."""
+    if trajectory_path is None:
+        return
+    taken = {"--log": log_path, "--map": map_path, "--state": state_path, "--out": out_path,
+             "--out's image": Path(out_path).with_suffix(".pgm")}
+    mine = Path(trajectory_path).resolve()
+    for name, path in taken.items():
+        if path is not None and Path(path).resolve() == mine:
+            raise LogError(f"{trajectory_path}: the trajectory would overwrite {name}; give "
+                           "it a path of its own")
 
 
 def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
@@ -183,3 +357,37 @@ def _changes(before: OccupancyGrid, after: OccupancyGrid) -> dict:
     a, b = before.data, after.data
     return {"cells_freed": int(((a != FREE) & (b == FREE)).sum()),
             "cells_occupied": int(((a != OCCUPIED) & (b == OCCUPIED)).sum())}
+
+
+# --- the summary, for people --------------------------------------------------------------------
+
+def summary_lines(s: dict) -> list[str]:
+    """The summary of ``update_from_log`` as lines for the command line: the map written, what
+    the readers skipped (one line per kind), how the localiser fared, warnings."""
+    g = s.get
+    out = [f"wrote {g('out')}: {g('cells_freed', 0)} cells freed, {g('cells_occupied', 0)} "
+           f"occupied (poses: {g('pose_source')})"]
+    out.append(f"  {g('scans', 0)} scans read, {g('scans_used', g('scans', 0))} used; "
+               f"{g('scans_processed', 0)} processed past the gate, "
+               f"{g('scans_dropped_as_lost', 0)} dropped as lost, "
+               f"{g('scans_refused_by_pose_check', 0)} refused by the pose check")
+    out += [f"  {line}" for line in g("read_lines") or []]
+    track = g("tracking")
+    if track:
+        out.append(f"  localiser: {track['start']}")
+        out += [f"  localiser {e['state']} at t = {e['time']:.2f} s: {e['reason']}"
+                for e in track["events"]]
+        if g("scans_not_tracking"):
+            out.append(f"  warning: {g('scans_not_tracking')} scans were not used: the "
+                       "localiser was not tracking")
+    if g("trajectory"):
+        out.append(f"  wrote {g('trajectory')} (TUM)")
+    return out
+
+
+def parse_pose(values) -> Pose2D:
+    """``X Y YAW`` [m, m, rad] from the command line as a finite pose."""
+    pose = Pose2D(*(float(v) for v in values))
+    if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta)):
+        raise LogError(f"--initial-pose must be three finite numbers X Y YAW, got {values}")
+    return pose

@@ -154,7 +154,10 @@ def test_truth_and_localizer_sources(world, tmp_path):
                         pose_source="localizer", updater_config=NO_GATING, progress=False,
                         initial_pose=steps[0][1], seed=5)
     assert s["pose_source"] == "localizer" and s["localizer_updates"] > 10
-    assert s["scans_used"] == len(steps)
+    # the route turns 90 deg within a scan at its corners: the filter's heading spread then
+    # passes 10 deg for a moment, and those few scans are withheld (not tracking)
+    assert s["scans_used"] + s["scans_not_tracking"] == len(steps)
+    assert s["scans_not_tracking"] <= 5
     # Estimates a few cm and degrees off: the removed box is freed all the same, and the
     # walls stay (the added box's faces need sharper poses to collect 7 flags of 10).
     out = load_map(tmp_path / "l.yaml")

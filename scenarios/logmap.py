@@ -1,0 +1,130 @@
+"""A first map from a recording with corrected poses: ``mapupdate map --log LOG --out MAP.yaml``.
+
+The same log-odds occupancy mapping that builds M1 in the simulator (``gridmap.mapping``, its
+default increments and thresholds), fed every scan of the log at the laser's pose the log
+gives: a corrected CARMEN log's laser poses, a bag's ``map -> odom`` tf (or ``/amcl_pose``)
+composed with odometry and the laser mount, or the true poses of a simulated session. The map's
+frame is the box around every hit point and every laser position, with a margin; cells no beam
+reached stay unknown. The result is a map_server YAML + PGM pair, written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D
+from robotlogs import LogError, log_observations
+
+MAP_SOURCES = ("recorded", "truth")
+MARGIN = 1.0                 # [m] of unknown around the box of hits
+MAX_CELLS = 200_000_000      # a map larger than this is refused (it would take gigabytes)
+
+
+def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: str = "recorded",
+                 start_time: float | None = None, end_time: float | None = None,
+                 log_format: str | None = None, strict: bool = False, scan_topics=None,
+                 odom_topic=None, pose_topic=None, truth_topic=None,
+                 laser_mount: Pose2D | None = None, params=None, progress: bool = True) -> dict:
+    """Build a map from the scans of ``log_path`` (those within ``start_time`` / ``end_time``
+    [s, log time] when given) and save it as ``out_path``; returns a summary. ``params``: a
+    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1)."""
+    from gridmap import save_map
+    from gridmap.mapping import LogOddsMapper
+
+    wall0 = _time.perf_counter()
+    if pose_source not in MAP_SOURCES:
+        raise LogError(f"the map's poses must be one of {', '.join(MAP_SOURCES)}, got "
+                       f"{pose_source!r}")
+    if not (isinstance(resolution, (int, float)) and math.isfinite(resolution)
+            and 0.005 <= resolution <= 10.0):
+        raise LogError(f"--resolution must be a number of metres in [0.005, 10], got "
+                       f"{resolution!r}")
+    _refuse_clash(log_path, out_path)
+    found = log_observations(log_path, log_format=log_format, strict=strict,
+                             scan_topics=scan_topics, odom_topic=odom_topic,
+                             pose_topic=pose_topic, truth_topic=truth_topic,
+                             laser_mount=laser_mount)
+    if not found.has["recorded" if pose_source == "recorded" else "truth"]:
+        raise LogError(f"{log_path}: no {'corrected' if pose_source == 'recorded' else 'true'} "
+                       "poses to map with (a map needs a log whose poses are right; a raw log "
+                       "can update a map with --poses localizer, not make one)")
+    placed = _placed_scans(found, pose_source, (start_time, end_time))
+    if not placed:
+        raise LogError(f"{log_path}: no scan with a pose to map (of {found.total}); "
+                       f"{found.stats.summary()}")
+    frame = map_frame(placed, float(resolution), log_path)
+    mapper = LogOddsMapper(frame, params)
+    from tqdm import tqdm
+
+    for scan, sensor in tqdm(placed, disable=not progress, unit="scan", leave=False,
+                             desc=f"mapping {Path(log_path).name}", dynamic_ncols=True):
+        mapper.add_scan(scan, sensor)
+    grid = mapper.to_grid()
+    save_map(grid, out_path)
+    return {"log": str(log_path), "out": str(out_path), "format": found.format,
+            "pose_source": pose_source, "scans": found.total, "scans_mapped": len(placed),
+            "resolution": frame.resolution, "origin": list(frame.origin),
+            "size": [frame.width, frame.height], **grid.counts(),
+            "read": found.stats.as_dict(), "read_lines": found.stats.lines(),
+            "wall_s": _time.perf_counter() - wall0}
+
+
+def _placed_scans(found, pose_source: str, window) -> list:
+    """(scan, laser pose in the map frame) of every observation that has the pose asked for."""
+    first, last = window
+    out = []
+    for obs in found.observations:
+        if (first is not None and obs.time < first) or (last is not None and obs.time > last):
+            continue
+        if pose_source == "recorded":
+            sensor = obs.sensor if obs.sensor is not None else (
+                None if obs.recorded is None else obs.recorded.compose(obs.mount))
+        else:
+            sensor = None if obs.truth is None else obs.truth.compose(obs.mount)
+        if sensor is not None and sensor.is_finite():
+            out.append((obs.scan, sensor))
+    return out
+
+
+def map_frame(placed, resolution: float, source="log") -> OccupancyGrid:
+    """An unknown grid over the box of every hit point (a return within the scan's limits) and
+    every laser position, ``MARGIN`` to spare on each side, corners on whole metres."""
+    points = []
+    for scan, sensor in placed:
+        r = scan.ranges.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            hit = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
+        a = scan.angles()[hit] + sensor.theta
+        points.append(np.c_[sensor.x + r[hit] * np.cos(a), sensor.y + r[hit] * np.sin(a)])
+        points.append(np.array([[sensor.x, sensor.y]]))
+    p = np.concatenate(points)
+    lo = np.floor(p.min(axis=0) - MARGIN)
+    hi = np.ceil(p.max(axis=0) + MARGIN)
+    width, height = (int(math.ceil(v / resolution - 1e-9)) for v in (hi - lo))
+    if width * height > MAX_CELLS:
+        raise LogError(f"{source}: the scans span {hi[0] - lo[0]:.0f} m x {hi[1] - lo[1]:.0f} m, "
+                       f"{width} x {height} cells at {resolution} m: more than {MAX_CELLS} "
+                       "cells; give a coarser --resolution")
+    return OccupancyGrid.empty(width, height, resolution, origin=(float(lo[0]), float(lo[1])))
+
+
+def _refuse_clash(log_path, out_path) -> None:
+    """Neither the map's YAML nor its image may be the log."""
+    log = Path(log_path).resolve()
+    for path in (Path(out_path), Path(out_path).with_suffix(".pgm")):
+        if path.resolve() == log:
+            raise LogError(f"{out_path}: the map would overwrite the log {log_path}")
+
+
+def summary_lines(s: dict) -> list[str]:
+    """The summary of ``map_from_log`` as lines for the command line."""
+    w, h = s["size"]
+    out = [f"wrote {s['out']}: {w} x {h} cells at {s['resolution']} m, origin "
+           f"({s['origin'][0]:g}, {s['origin'][1]:g}); {s['occupied']} occupied, "
+           f"{s['free']} free",
+           f"  {s['scans_mapped']} of {s['scans']} scans mapped (poses: {s['pose_source']})"]
+    return out + [f"  {line}" for line in s["read_lines"]]

@@ -195,11 +195,11 @@ class PoseCheck:
         return PoseFit(float(score[0]), float(score[0] - score[best]),
                        Pose2D(float(dx), float(dy), float(dth)), beams.count)
 
-    def agrees(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> bool:
-        """True unless a pose of the search grids fits the scan clearly better than
-        ``robot_pose`` (the fit half of ``check``, without the hold and the covariance)."""
-        f = self.fit(scan, robot_pose, sensor_mount)
-        return f is None or not (f.gain > self.config.max_gain and self._far(f.correction))
+    def better_nearby(self, f: PoseFit) -> bool:
+        """True when the fit found a pose on the search grids that fits the scan clearly better
+        than the given one, and far enough away to say the given one is off: what ``check``
+        refuses for."""
+        return f.gain > self.config.max_gain and self._far(f.correction)
 
     def refine(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
                cov: np.ndarray | None = None) -> str | Pose2D:
@@ -285,7 +285,7 @@ class PoseCheck:
         f = self._fit(beams, robot_pose, sensor_mount)
         if f is None:
             return "", None
-        return (UNSURE_FIT if f.gain > c.max_gain and self._far(f.correction) else ""), f
+        return (UNSURE_FIT if self.better_nearby(f) else ""), f
 
     def _far(self, correction: Pose2D) -> bool:
         c = self.config

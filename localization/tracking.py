@@ -9,15 +9,19 @@ Two kinds of evidence, one cheap and one costly:
   ``max_yaw_std_deg``. An odometry jump (a driver's glitch, 100 m between two scans) scatters
   the particles: the heaviest cluster then holds a fifth of the weight, often a single
   particle. A global start is as scattered until the scans have narrowed it down;
-- the scan's, judged as the pose check judges it (``PoseCheck.agrees``): no pose nearby fits the
-  scan to the map clearly better. A filter that has settled in the wrong place after a jump
-  looks confident (spreads of 5-10 cm) while its scans fit a pose elsewhere; so the scan must
-  agree too before a lost or converging filter is trusted (``settle_updates`` times running).
+- the scan's, scored as the pose check scores it (``PoseCheck.fit``): the scan must fit the map
+  at the estimate (a mean capped residual of at most ``max_fit``) and no pose nearby may fit it
+  clearly better (``PoseCheck.better_nearby``). A filter that has settled in the wrong place
+  looks confident (spreads of 5-10 cm): after a 100 m jump in the simulated warehouse, and a
+  start over the whole map, one settled in the wrong aisle with a fit of 0.51-0.58 where the
+  right pose scores 0.05-0.10 and no pose within a metre scored better. So the scan must fit
+  too, ``settle_updates`` times running, before a lost or converging filter is trusted.
 
-A tracking filter is judged by its spreads alone: the scan's fit costs a search, and the pose
-check (when the caller has one) already asks it at every scan the updater processes. A filter
-that stays unsure for ``relocalise_after`` updates is started again over the whole map
-(``initialize_global``), with a particle count that grows with the free area.
+A tracking filter is judged by its spreads alone, which cost nothing, and by the updater: when
+its lost check drops ``lost_scans`` processed scans in a row, most beams of each disagreeing
+with the map, the pose is taken to be wrong (``observe_lost``). A filter that stays unsure for
+``relocalise_after`` updates is started again over the whole map (``initialize_global``), with
+a particle count that grows with the free area.
 """
 
 from __future__ import annotations
@@ -59,15 +63,17 @@ class TrackingConfig:
     max_position_std: float = 0.15
     max_yaw_std_deg: float = 5.0
     settle_updates: int = 3
+    max_fit: float = 0.3               # [1] the pose check's fit (0 perfect, 1 nothing fits)
     # Lost, when tracking, once the filter's spreads pass these looser bounds: a filter
     # turning on the spot spreads its headings to 6 deg for a moment and is not lost for that.
     lost_cluster_share: float = 0.5
     lost_position_std: float = 0.3
     lost_yaw_std_deg: float = 10.0
-    relocalise_after: int = 20         # unsure updates before a global restart; 0: never
-    global_particles_per_m2: float = 10.0   # [1/m^2] of free space, for a global start ...
-    min_global_particles: int = 2000        # ... within these bounds
-    max_global_particles: int = 50000
+    lost_scans: int = 3                # scans dropped in a row by the updater's lost check
+    relocalise_after: int = 30         # unsure updates before a global restart; 0: never
+    global_particles_per_m2: float = 30.0   # [1/m^2] of free space, for a global start ...
+    min_global_particles: int = 5000        # ... within these bounds
+    max_global_particles: int = 100000
 
     def __post_init__(self):
         for f in fields(self):
@@ -85,6 +91,9 @@ class TrackingConfig:
             raise LocalizationError("tracking keys 'lost_position_std' and "
                                     "'lost_yaw_std_deg' must be at least 'max_position_std' "
                                     "and 'max_yaw_std_deg'")
+        if self.max_fit > 1 or self.settle_updates < 1 or self.lost_scans < 1:
+            raise LocalizationError("tracking keys: 'max_fit' must be <= 1, 'settle_updates' "
+                                    "and 'lost_scans' >= 1")
         if not 1 <= self.min_global_particles <= self.max_global_particles:
             raise LocalizationError("tracking keys 'min_global_particles' and "
                                     "'max_global_particles' must satisfy 1 <= min <= max")
@@ -105,6 +114,7 @@ class TrackingMonitor:
         self.restarts = 0          # global restarts made
         self._streak = 0           # confident, agreeing updates in a row
         self._unsure = 0           # updates since trust was lost (or since the last start)
+        self._dropped = 0          # processed scans in a row the updater dropped as lost
 
     @property
     def tracking(self) -> bool:
@@ -137,7 +147,7 @@ class TrackingMonitor:
                 self._change(t, TrackState.LOST, doubt)
             return self.state
         doubt = self.doubt(localizer.estimate())
-        agrees = not doubt and self._check.agrees(scan, robot_pose, sensor_mount)
+        agrees = not doubt and self._fits(scan, robot_pose, sensor_mount)
         self._streak = self._streak + 1 if agrees else 0
         self._unsure += 1
         if self._streak >= self.config.settle_updates:
@@ -147,6 +157,18 @@ class TrackingMonitor:
             self.start_global(localizer, t, f"unsure for {self._unsure} filter updates: "
                                             "started again over the whole map")
         return self.state
+
+    def observe_lost(self, dropped: bool, time: float) -> None:
+        """Tell the monitor whether the updater's lost check dropped a scan it processed."""
+        self._dropped = self._dropped + 1 if dropped else 0
+        if self.state is TrackState.TRACKING and self._dropped >= self.config.lost_scans:
+            self._change(time, TrackState.LOST, f"the updater's lost check dropped "
+                                                f"{self._dropped} scans in a row")
+
+    def _fits(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> bool:
+        f = self._check.fit(scan, robot_pose, sensor_mount)
+        return f is not None and f.fit <= self.config.max_fit and \
+            not self._check.better_nearby(f)
 
     def doubt(self, estimate, lost: bool = False) -> str:
         """Why the filter's own spreads leave the estimate unsure ("" when they do not): by the
@@ -173,4 +195,5 @@ class TrackingMonitor:
         self.state = state
         self._streak = 0
         self._unsure = 0
+        self._dropped = 0
         self.events.append(TrackEvent(time, state, reason))

@@ -196,7 +196,8 @@ def _add_update(sub) -> None:
     upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
                           "covariance) calls unsure (default: off; README, 'Choices')")
-    upd.add_argument("--initial-pose", nargs=3, default=None, metavar=("X", "Y", "YAW"),
+    upd.add_argument("--initial-pose", nargs=3, type=float, default=None,
+                     metavar=("X", "Y", "YAW"),
                      help="where the localiser starts, in the map frame [m, m, rad] (default: "
                           "the log's localisation if it has one, else over the whole map)")
     upd.add_argument("--trajectory", type=Path, default=None, metavar="OUT.tum",

@@ -98,6 +98,8 @@ class RobotPipeline:
         report = self.updater.process(scan, sensor, odometry=odometry, pose_check=check)
         self.cpu["updater_s"] += time.process_time() - t0
         self._count(report)
+        if self.tracking is not None and report.processed:
+            self.tracking.observe_lost(report.dropped_as_lost, float(scan.time))
         return Step(robot, report, used[-1])
 
     def _verdict(self, scan, robot, mount, cov, used: list):

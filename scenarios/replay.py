@@ -21,7 +21,8 @@ Where the poses come from (``pose_source``):
   lost track (an odometry jump), its scans change nothing, and one unsure for long is started
   again over the whole map.
 - ``"truth"``: a bag's true pose topic (simulated sessions), a CARMEN log's ``TRUEPOS``.
-- ``"auto"``: ``"recorded"`` when the log has poses for its scans, else ``"localizer"``.
+- ``"auto"``: ``"recorded"`` when the log has poses for its scans and no ``initial_pose`` is
+  given, else ``"localizer"``.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class Replay:
     """What the replay loop gathers besides the pipeline's counters."""
 
     read: int = 0                                        # observations read from the log
+    first_time: float | None = None                      # [s] of the first scan replayed
     times: list = field(default_factory=list)            # [s] of the scans the update used
     poses: list = field(default_factory=list)            # robot poses (x, y, yaw) it used
     start: str = ""                                      # how the localiser started
@@ -96,7 +98,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                              scan_topics=scan_topics, odom_topic=odom_topic,
                              pose_topic=pose_topic, truth_topic=truth_topic,
                              laser_mount=laser_mount)
-    source = _choose_source(pose_source, found.has, log_path)
+    source = _choose_source(pose_source, found.has, log_path, initial_pose is not None)
     updater, state_loaded = _updater(grid, updater_config, state_path)
     pipeline = _pipeline(updater, pose_check, pose_check_config)
     starter = None
@@ -176,6 +178,8 @@ def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
             if starter is not None and pipeline.localizer is None and obs.odom is not None:
                 pipeline.localizer, pipeline.tracking = starter.start(obs)
                 out.start = starter.how
+            if out.first_time is None:
+                out.first_time = obs.time
             pose, mount = _given_pose(obs, source, smoother)
             step = pipeline.step(obs.scan, mount, odometry=obs.odom, pose=pose)
             _note_pose(out, obs, step, mount)
@@ -212,9 +216,14 @@ def _check_placed(pipeline: RobotPipeline, replay: Replay, found, log_path) -> N
                        f"{doubt}); give the start with --initial-pose X Y YAW")
 
 
-def _choose_source(asked: str, has: dict, log_path) -> str:
+def _choose_source(asked: str, has: dict, log_path, start_given: bool = False) -> str:
+    """The pose source to use: ``asked``, or for "auto" the recorded poses when the log has
+    them and no start was given for the localiser."""
     if asked == "auto":
-        asked = "recorded" if has["recorded"] else "localizer"
+        asked = "recorded" if has["recorded"] and not start_given else "localizer"
+    if start_given and asked != "localizer":
+        raise LogError(f"a start pose is for the localiser (--poses localizer), not for "
+                       f"--poses {asked}")
     if asked == "recorded" and not has["recorded"]:
         raise LogError(f"{log_path}: no recorded localisation (map -> odom tf, pose topic or "
                        "corrected laser poses); use the localiser")
@@ -315,9 +324,10 @@ def _tracking_summary(pipeline: RobotPipeline, replay: Replay) -> dict | None:
     monitor = pipeline.tracking
     if monitor is None:
         return None
+    t0 = replay.first_time or 0.0
     return {"start": replay.start, "state": monitor.state.value, "restarts": monitor.restarts,
-            "events": [{"time": e.time, "state": e.state.value, "reason": e.reason}
-                       for e in monitor.events]}
+            "events": [{"time": e.time, "after": e.time - t0, "state": e.state.value,
+                        "reason": e.reason} for e in monitor.events]}
 
 
 def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -> None:
@@ -367,15 +377,18 @@ def summary_lines(s: dict) -> list[str]:
     g = s.get
     out = [f"wrote {g('out')}: {g('cells_freed', 0)} cells freed, {g('cells_occupied', 0)} "
            f"occupied (poses: {g('pose_source')})"]
-    out.append(f"  {g('scans', 0)} scans read, {g('scans_used', g('scans', 0))} used; "
-               f"{g('scans_processed', 0)} processed past the gate, "
-               f"{g('scans_dropped_as_lost', 0)} dropped as lost, "
+    skipped = sum((g("read") or {}).get("skipped", {}).values())
+    out.append(f"  {g('scans', 0)} scans read" + (f" ({skipped} lines or messages of the log "
+                                                   "skipped, below)" if skipped else "")
+               + f", {g('scans_used', g('scans', 0))} used; {g('scans_processed', 0)} "
+               f"processed past the gate, {g('scans_dropped_as_lost', 0)} dropped as lost, "
                f"{g('scans_refused_by_pose_check', 0)} refused by the pose check")
     out += [f"  {line}" for line in g("read_lines") or []]
+    out += [f"  warning: {w}" for w in _warnings(s)]
     track = g("tracking")
     if track:
         out.append(f"  localiser: {track['start']}")
-        out += [f"  localiser {e['state']} at t = {e['time']:.2f} s: {e['reason']}"
+        out += [f"  localiser {e['state']} {e['after']:.1f} s into the log: {e['reason']}"
                 for e in track["events"]]
         if g("scans_not_tracking"):
             out.append(f"  warning: {g('scans_not_tracking')} scans were not used: the "
@@ -385,9 +398,29 @@ def summary_lines(s: dict) -> list[str]:
     return out
 
 
+def _warnings(s: dict) -> list[str]:
+    """What a user should look at: scans whose poses disagree with the map, mostly."""
+    g = s.get
+    asked = g("scans_processed", 0) + g("scans_refused_by_pose_check", 0)
+    out = []
+    if asked and g("scans_refused_by_pose_check", 0) > 0.5 * asked:
+        out.append(f"the pose check refused {g('scans_refused_by_pose_check')} of the {asked} "
+                   "scans past the gate: their poses disagree with the map (drifted odometry? "
+                   "try --poses localizer)")
+    if g("scans_processed", 0) and g("scans_dropped_as_lost", 0) > 0.5 * g("scans_processed"):
+        out.append(f"the lost check dropped {g('scans_dropped_as_lost')} of the "
+                   f"{g('scans_processed')} scans processed: most beams disagree with the map "
+                   "there (wrong poses, or a place the map does not cover)")
+    return out
+
+
 def parse_pose(values) -> Pose2D:
     """``X Y YAW`` [m, m, rad] from the command line as a finite pose."""
-    pose = Pose2D(*(float(v) for v in values))
-    if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.theta)):
-        raise LogError(f"--initial-pose must be three finite numbers X Y YAW, got {values}")
-    return pose
+    try:
+        x, y, yaw = (float(v) for v in values)
+    except (TypeError, ValueError):
+        x = y = yaw = math.nan
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise LogError(f"--initial-pose must be three finite numbers X Y YAW, got "
+                       f"{' '.join(map(str, values))}")
+    return Pose2D(x, y, yaw)

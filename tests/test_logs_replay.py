@@ -323,3 +323,67 @@ def test_pose_check_keeps_walls_when_the_recorded_poses_are_off(world, tmp_path)
     s_right, freed_right = freed_walls(right, True)
     assert s_right["scans_refused_by_pose_check"] < 0.1 * s_right["scans_used"]
     assert freed_right == 0 and s_right["cells_freed"] > 50
+
+
+# --- hostile input: bad readings kept, skipped lines counted (hostile-input issue) ----------------
+def _carmen_lines(steps, bad=None):
+    """The session as FLASER lines (laser pose = true pose with the mount); ``bad(k, r)`` may
+    spoil readings of line k (a list of words)."""
+    lines = []
+    for k, (t, true, odom, scan) in enumerate(steps):
+        sensor = true.compose(MOUNT)
+        r = [f"{v:.3f}" for v in np.where(np.isfinite(scan.ranges), scan.ranges, 81.83)[45:225]]
+        if bad is not None:
+            bad(k, r)
+        lines.append("FLASER 180 " + " ".join(r) + f" {sensor.x:.6f} {sensor.y:.6f} "
+                     f"{sensor.theta:.6f} {true.x:.6f} {true.y:.6f} {true.theta:.6f} {t:.3f} h 0")
+    return lines
+
+
+def test_carmen_scans_with_nan_negative_or_huge_readings_are_all_used(world, tmp_path):
+    _, steps = world
+
+    def spoil(k, r):                   # three bad readings among the 180 of every line
+        r[10], r[90], r[170] = "nan", "-0.5", "1e9"
+
+    def blank(k, r):                   # the same readings as plain invalid beams
+        r[10], r[90], r[170] = "0.000", "0.000", "0.000"
+
+    for name, change in (("bad", spoil), ("blank", blank)):
+        (tmp_path / f"{name}.log").write_text("\n".join(_carmen_lines(steps, change)) + "\n")
+    s = update_from_log(world[0] / "map.yaml", tmp_path / "bad.log", tmp_path / "bad.yaml",
+                        updater_config=NO_GATING, progress=False)
+    update_from_log(world[0] / "map.yaml", tmp_path / "blank.log", tmp_path / "blank.yaml",
+                    updater_config=NO_GATING, progress=False)
+    assert s["scans"] == s["scans_used"] == len(steps) and s["read"]["skipped"] == {}
+    assert s["read_lines"] == [f"kept {len(steps)} scans with {2 * len(steps)} invalid ranges "
+                               "(NaN or negative) as invalid beams"]
+    np.testing.assert_array_equal(load_map(tmp_path / "bad.yaml").data,
+                                  load_map(tmp_path / "blank.yaml").data)
+
+
+def test_skipped_lines_are_reported_per_kind_and_strict_refuses_them(world, tmp_path, capfd):
+    """112 scan lines, 56 of them cut short and 1 of an unknown kind: the summary says so, one
+    line per kind, and --strict refuses the log before writing anything."""
+    from scenarios.cli import main
+
+    _, steps = world
+    lines = _carmen_lines((steps * 2)[:112])
+    for k in range(1, 112, 2):
+        lines[k] = " ".join(lines[k].split()[:50])
+    lines.insert(3, "FOO 1 2 3")
+    log = tmp_path / "cut.log"
+    log.write_text("\n".join(lines) + "\n")
+    argv = ["update", "--map", str(world[0] / "map.yaml"), "--log", str(log), "--out",
+            str(tmp_path / "cut.yaml"), "--no-progress"]
+    assert main(argv) == 0
+    out = capfd.readouterr().out.splitlines()
+    assert "56 scans read (57 lines or messages of the log skipped, below)" in out[1]
+    assert out[2].startswith(f"  skipped 56 (truncated); first: {log}, line 2: FLASER")
+    assert out[3] == f"  skipped 1 (unknown message); first: {log}, line 4: unknown message " \
+                     "type 'FOO'"
+    (tmp_path / "cut.yaml").unlink()
+    assert main(argv + ["--strict"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and f"{log}, line 2: FLASER" in err and "truncated" in err
+    assert not (tmp_path / "cut.yaml").exists()

@@ -34,8 +34,11 @@ def _cmd_render(args) -> int:
     import sim
 
     from .catalog import find_scenario
+    from .outputs import check_outputs
 
-    scenario = sim.load_scenario(find_scenario(args.scenario))
+    path = find_scenario(args.scenario)
+    check_outputs({"scenario": [path]}, {"--out": [args.out]})
+    scenario = sim.load_scenario(path)
     out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
     print(f"wrote {out}")
     return 0
@@ -86,10 +89,16 @@ def _rerun_recorder(args):
 
 
 def _cmd_update(args) -> int:
+    from .outputs import check_outputs, map_files, map_inputs
     from .replay import update_from_log
     from .robot_config import load_robot_config
 
     config = load_robot_config(args.config)     # refused before the log is read
+    check_outputs({"--map": map_inputs(args.map), "--log": [args.log],
+                   "--config": [args.config] if args.config else [],
+                   "--state": [args.state] if args.state and args.state.exists() else []},
+                  {"--out": map_files(args.out), "--state": [args.state] if args.state else []},
+                  both=("--state",))
     summary = update_from_log(args.map, args.log, args.out, args.state,
                               pose_source=args.poses, updater_config=config.updater,
                               localizer_config=config.localizer,

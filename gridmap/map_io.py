@@ -97,7 +97,7 @@ def read_map_values(path) -> tuple[np.ndarray, MapMetadata]:
     """The cell values map_server would publish for this map (int8, grid rows: row 0 = lowest y)
     and the validated metadata. Values are 0..100 or -1, graded in ``scale`` and ``raw`` modes."""
     meta = read_map_yaml(path)
-    pixels, maxval, opaque = _read_image(meta.image, path, meta.mode)
+    pixels, maxval, opaque = _read_image(meta.image, path)
     values = _pixels_to_values(pixels, maxval, meta)
     if opaque is not None and meta.mode == "scale":     # map_server: graded and see-through
         values[~opaque & (values > FREE) & (values < OCCUPIED)] = UNKNOWN
@@ -238,11 +238,11 @@ def _check_size(path: Path, width: int, height: int) -> None:
                            f"{MAX_CELLS} cells a map can have")
 
 
-def _read_image(path: Path, yaml_path: Path, mode: str = "trinary"
-                ) -> tuple[np.ndarray, int, np.ndarray | None]:
+def _read_image(path: Path, yaml_path: Path) -> tuple[np.ndarray, int, np.ndarray | None]:
     """PGM through :func:`read_pgm`; PNG and the other formats map_server accepts through
-    Pillow, read as map_server reads them: the mean of the colour channels (alpha left out),
-    scaled by the image's depth (8 or 16 bits)."""
+    Pillow, read as map_server reads them: the mean of the colour channels, scaled by the
+    image's depth (8 or 16 bits); alpha marks see-through pixels, which only ``scale`` mode
+    uses (see ``_channel_mean``)."""
     try:
         check_regular_file(path, "image file")
         with open(path, "rb") as f:
@@ -264,16 +264,19 @@ def _read_image(path: Path, yaml_path: Path, mode: str = "trinary"
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             with Image.open(path) as im:
                 _check_size(path, *im.size)    # from the header, before any pixel is read
-                return _channel_mean(im, with_alpha=mode == "trinary")
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError,
-            Image.DecompressionBombWarning, Image.DecompressionBombError) as e:
+                return _channel_mean(im)
+    except (Image.DecompressionBombWarning, Image.DecompressionBombError) as e:
+        raise MapFileError(f"{path}: the image's header claims more pixels than the "
+                           f"{MAX_CELLS} cells a map can have ({_one_line(e)})") from None
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError) as e:
         raise MapFileError(f"{path}: cannot read image ({_one_line(e)})") from None
 
 
-def _channel_mean(im, with_alpha: bool) -> tuple[np.ndarray, int, np.ndarray | None]:
-    """(pixels, maxval, opaque): the mean of an image's channels as ROS map_server takes it,
-    alpha averaged in (its trinary mode) or left out (the other modes, which then report the
-    pixels that are not fully opaque); 16-bit greyscale keeps its depth."""
+def _channel_mean(im) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """(pixels, maxval, opaque): the mean of an image's colour channels, as ROS 2's map_server
+    takes it, alpha left out and reported (``opaque``, None without alpha); 16-bit
+    greyscale keeps its depth. (ROS 1's map_server averages alpha into trinary maps, which
+    reads an opaque RGBA image's unknown grey as free; that is not followed.)"""
     mode = im.mode
     if mode in ("P", "PA"):                 # a palette: its colours (and transparency)
         im = im.convert("RGBA" if "transparency" in im.info or mode == "PA" else "RGB")
@@ -289,9 +292,9 @@ def _channel_mean(im, with_alpha: bool) -> tuple[np.ndarray, int, np.ndarray | N
     if a.ndim == 2:
         return a.astype(np.uint16), 255, None
     has_alpha = mode in ("RGBA", "LA", "RGBa", "La")
-    channels = a if with_alpha or not has_alpha else a[..., :-1]
-    mean = np.rint(channels.astype(np.float64).mean(axis=2)).astype(np.uint16)
-    return mean, 255, (a[..., -1] == 255) if has_alpha and not with_alpha else None
+    colour = a[..., :-1] if has_alpha else a
+    mean = np.rint(colour.astype(np.float64).mean(axis=2)).astype(np.uint16)
+    return mean, 255, (a[..., -1] == 255) if has_alpha else None
 
 
 def _pixels_to_values(pixels: np.ndarray, maxval: int, meta: MapMetadata) -> np.ndarray:
@@ -364,6 +367,12 @@ def _write_atomically(path: Path, content: bytes) -> None:
 # --- helpers -----------------------------------------------------------------------------------
 
 def _number(path: Path, key: str, value) -> float:
+    if isinstance(value, str):
+        # YAML 1.1 reads 1e-3 (no dot) as text; map_server's YAML reader takes it as a number
+        try:
+            value = float(value)
+        except ValueError:
+            pass
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise MapFileError(f"{path}: key '{key}' must be a finite number, got {value!r}")
     return float(value)

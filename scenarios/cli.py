@@ -229,11 +229,13 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     traceback. Every package's own error derives from ``MapUpdatingError``."""
     from gridmap import MapUpdatingError
 
-    return (MapUpdatingError, FileNotFoundError, PermissionError, IsADirectoryError)
+    # OSError: the machine's answer to a write or read (a full disk, a read-only folder, no
+    # permission), which names the file; the user can act on it
+    return (MapUpdatingError, OSError)
 
 
 def main(argv: list[str] | None = None) -> int:
-    full = sys.argv if argv is None else ["mapupdate", *argv]
+    full = sys.argv if argv is None else ["mapupdate", *map(str, argv)]
     # ROS remappings and private parameters (``__name:=x``, ``_rate:=5``) are ROS's, not ours
     args = build_parser().parse_args([a for a in full[1:] if ":=" not in a])
     args.ros_argv = full
@@ -245,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - sorted into user errors and bugs just below
         if args.debug or not isinstance(exc, _user_errors()):
             raise
-        print(f"mapupdate {args.command}: error: {exc}", file=sys.stderr)
+        print(f"mapupdate {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
 
 

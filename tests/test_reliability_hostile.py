@@ -346,3 +346,29 @@ def test_a_full_disk_mid_run_is_one_line_and_leaves_only_whole_files(tmp_path, c
                 json.loads(f.read_text())
             elif f.suffix == ".yaml" and f.parent.name == "maps":
                 load_map(f)
+
+
+def test_maps_state_and_metrics_are_flushed_to_disk_before_and_after_the_rename(
+        tmp_path, monkeypatch):
+    """Durability against a power cut: each file is fsynced before it is renamed into place,
+    and its folder after."""
+    import stat
+
+    import gridmap.atomic as atomic
+    from updater import MapUpdater
+
+    synced = []
+    real = atomic.os.fsync
+
+    def fsync(fd):
+        st = os.fstat(fd)
+        synced.append("folder" if stat.S_ISDIR(st.st_mode) else st.st_size)
+        return real(fd)
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
+    grid = reference_grid()
+    save_map(grid, tmp_path / "m.yaml")                              # image, then YAML
+    MapUpdater(grid).save(tmp_path / "s.npz")
+    atomic.write_atomically(tmp_path / "metrics.json", "{}\n")
+    sizes = [(tmp_path / n).stat().st_size for n in ("m.pgm", "m.yaml", "s.npz", "metrics.json")]
+    assert synced == [sizes[0], "folder", sizes[1], "folder", sizes[2], "folder", sizes[3],
+                      "folder"]

@@ -26,9 +26,9 @@ the caller's ``pose_check`` refuses (``ScanStatus.REFUSED``; e.g.
 from __future__ import annotations
 
 import enum
+import io
 import json
 import math
-import os
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
+from gridmap.atomic import write_atomically
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
@@ -261,22 +262,16 @@ class MapUpdater:
         """Write the whole state to ``path`` (npz): written to a temporary file beside it and
         renamed, so a crash never leaves a half-written state."""
         path = Path(path)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
                 "gate": self._gate.state(), "counts": self._counts}
+        buf = io.BytesIO()
+        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
+                            hist=self._hist)
         try:
-            with open(tmp, "wb") as f:
-                np.savez_compressed(f, meta=np.array(json.dumps(meta)), reference=self._ref,
-                                    hist=self._hist)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException as e:      # interrupted too: never leave the temporary file
-            tmp.unlink(missing_ok=True)
-            if isinstance(e, OSError):
-                raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
-            raise
+            write_atomically(path, buf.getvalue())
+        except OSError as e:
+            raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
 
     @classmethod
     def load(cls, path) -> MapUpdater:

@@ -312,17 +312,18 @@ def test_walk_against_reference(seed):
         assert got == ref_walk(data, sensor, hit, reach, drop_last)
 
 
-def test_flag_listed_against_reference():
-    rng = np.random.default_rng(10)
+@pytest.mark.parametrize("free", [True, False])
+def test_flag_listed_against_reference(free):
+    rng = np.random.default_rng(10 + free)
     data = random_map(rng, h=20, w=20, p_occ=0.3, p_unk=0.2)
     marks = np.zeros(50, np.uint8)
     out = np.zeros(401, np.int32)
+    flag = K.flag_free_listed if free else K.flag_occupied_listed
     n, expect, seen = 0, [], set()
     for trial in range(30):
         count = int(rng.integers(0, 40))
         cells = np.stack([rng.integers(0, 20, 45), rng.integers(0, 20, 45)]).astype(np.int64)
-        free = bool(rng.random() < 0.5)
-        n = K.flag_listed(data, cells, count, free, marks, out, n)
+        n = flag(data, cells, count, marks, out, n)
         for r, c in zip(cells[0, :count], cells[1, :count]):
             if (data[r, c] == FREE) == free and r * 20 + c not in seen:
                 seen.add(r * 20 + c)

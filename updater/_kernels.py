@@ -222,11 +222,12 @@ def walk(ref, sensor, hit, reach, drop_last, cells):
 
 
 @njit(cache=True)
-def flag_listed(ref, cells, count, free, marks, out, n):
+def flag_free_listed(ref, cells, count, marks, out, n):
     """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are free
-    (``free``) or occupied-or-unknown (not ``free``) in ``ref`` and not yet marked, and mark
-    them. Returns the new count. ``out[n]`` is written for every cell and kept only when the
-    cell is taken, which spares a branch per cell (``out`` needs one slot to spare)."""
+    in ``ref`` and not yet marked, and mark them. Returns the new count. Most cells of a free
+    walk are free, and about half of them new, so the flag goes in without a branch:
+    ``out[n]`` is written for every cell and kept only when the cell is taken (``out`` needs
+    one slot to spare)."""
     width = ref.shape[1]
     flat = ref.reshape(-1)
     for k in range(count):
@@ -234,10 +235,24 @@ def flag_listed(ref, cells, count, free, marks, out, n):
         b = idx >> 3
         bit = np.uint8(1 << (idx & 7))
         old = marks[b]
-        take = ((flat[idx] == FREE) == free) & ((old & bit) == 0)
+        take = (flat[idx] == FREE) & ((old & bit) == 0)
         marks[b] = old | (bit if take else np.uint8(0))
         out[n] = idx
         n += take
+    return n
+
+
+@njit(cache=True)
+def flag_occupied_listed(ref, cells, count, marks, out, n):
+    """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are
+    occupied or unknown in ``ref`` and not yet marked, and mark them. Returns the new count."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for k in range(count):
+        idx = cells[0, k] * width + cells[1, k]
+        if flat[idx] != FREE and test_and_set(marks, idx):
+            out[n] = idx
+            n += 1
     return n
 
 
@@ -269,7 +284,7 @@ def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out)
         if verdict[i] != CHANGE or not reach[i] > 0.0:
             continue
         count = walk(ref, sensor, hits[i], reach[i], True, cells)
-        n = flag_listed(ref, cells, count, False, marks, out, n)
+        n = flag_occupied_listed(ref, cells, count, marks, out, n)
     return n
 
 
@@ -310,12 +325,12 @@ def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, marks, out):
             dy = max(row - y, 0.0, y - row - 1.0)
             for col in range(max(int(np.floor(x - radius)), 0),
                              min(int(np.floor(x + radius)) + 1, width)):
-                dx = max(col - x, 0.0, x - col - 1.0)
-                if dx * dx + dy * dy > r2:
-                    continue
                 v = ref[row, col]
+                if v == FREE:
+                    continue
+                dx = max(col - x, 0.0, x - col - 1.0)
                 idx = row * width + col
-                if v == FREE or (v != OCC and bit_get(enclosed, idx)):
+                if dx * dx + dy * dy > r2 or (v != OCC and bit_get(enclosed, idx)):
                     continue
                 if test_and_set(marks, idx):
                     out[n] = idx
@@ -362,7 +377,7 @@ def flag_free_unchanged(ref, sensor, hits, reach, verdict, marks, cells, out):
         if verdict[i] != UNCHANGED:
             continue
         count = walk(ref, sensor, hits[i], reach[i], False, cells)
-        n = flag_listed(ref, cells, count, True, marks, out, n)
+        n = flag_free_listed(ref, cells, count, marks, out, n)
     return n
 
 

@@ -14,6 +14,7 @@ kernels of ``updater._kernels`` once each for the whole scan. Points are in grid
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -24,8 +25,11 @@ from gridmap import Scan
 from .config import UpdaterConfig
 
 
+@functools.cache
 def kernels():
-    from . import _kernels  # numba is imported lazily, on first use
+    """The kernels module: numba is imported on first use, not with the package. Cached, as
+    an import statement costs about as much as a small kernel's call."""
+    from . import _kernels
 
     return _kernels
 

@@ -60,15 +60,6 @@ def popcount16(v):
 
 # --- 1. beam classifier -----------------------------------------------------------------------
 @njit(cache=True)
-def beam_directions(yaw, angle_min, step, out):
-    """(cos, sin) of beam j at ``yaw + angle_min + j * step`` [rad], for every row of ``out``."""
-    for j in range(out.shape[0]):
-        a = yaw + angle_min + j * step
-        out[j, 0] = np.cos(a)
-        out[j, 1] = np.sin(a)
-
-
-@njit(cache=True)
 def valid_ranges(ranges, r_lo, r_hi, out_r, out_valid):
     """A beam is valid when its range r [m] is finite, r > 0 (r = 0 is no hit), r >= r_lo and
     r < r_hi. ``out_r`` gets the ranges as float64, NaN for invalid beams."""
@@ -77,6 +68,15 @@ def valid_ranges(ranges, r_lo, r_hi, out_r, out_valid):
         ok = np.isfinite(r) and r > 0.0 and r >= r_lo and r < r_hi
         out_valid[i] = ok
         out_r[i] = r if ok else np.nan
+
+
+@njit(cache=True)
+def beam_directions(yaw, angle_min, step, out):
+    """(cos, sin) of beam j at ``yaw + angle_min + j * step`` [rad], for every row of ``out``."""
+    for j in range(out.shape[0]):
+        a = yaw + angle_min + j * step
+        out[j, 0] = np.cos(a)
+        out[j, 1] = np.sin(a)
 
 
 @njit(cache=True)

@@ -5,10 +5,13 @@ was made. Scans are ray-cast on a 1 cm grid of the true room from poses on a cir
 1 deg pose noise (seeded). Every scan is processed (gating off); timings are taken after the
 kernels are compiled, as the median over all scans, best of three passes (the machine is shared).
 The same scans then run on a 2000 x 2000 map holding the same room, to show that a scan costs
-the same whatever the map's size. Memory: the bytes of the updater's arrays for the 2000 x 2000
+the same whatever the map's size. One more pass with timers around the kernels says where the
+time of a 720-beam scan goes. Memory: the bytes of the updater's arrays for the 2000 x 2000
 map, and the peak resident memory of a process that does only that (resource.getrusage).
 
     python benchmarks/bench_updater.py [--scans N]
+
+Exits with 1 when a median per scan misses its budget.
 """
 
 from __future__ import annotations
@@ -98,6 +101,55 @@ def time_scans(ref: OccupancyGrid, scans, passes: int = 3) -> dict:
             "lost": lost, "changed_cells": updater.n_changed, "state_bytes": updater.state_bytes()}
 
 
+# The kernels a scan goes through, by the step of ALGORITHM.md they belong to.
+PARTS = (("virtual beams cast (cast_virtual)", ("cast_virtual",)),
+         ("rest of the classifier", ("valid_ranges", "beam_directions", "beam_endpoints",
+                                     "classify", "run_filter", "beam_verdicts")),
+         ("seen-surface guard", ("mark_seen_surfaces", "clear_bits")),
+         ("changed cells: removed-obstacle walks", ("flag_removed_obstacles",)),
+         ("changed cells: new obstacles", ("flag_new_obstacles",)),
+         ("unchanged cells: free walks", ("flag_free_unchanged",)),
+         ("unchanged cells: occupied", ("flag_occupied_unchanged",)),
+         ("push and decide", ("push_flags", "decide")))
+
+
+def time_parts(ref: OccupancyGrid, scans) -> dict:
+    """Mean time per scan [ms] of each part of ``PARTS``, from timers wrapped around the
+    kernels for one pass, and of the Python around them (the rest of the mean per scan)."""
+    from updater import steps
+
+    kernels = steps.kernels()
+    spent = {name: 0.0 for _, names in PARTS for name in names}
+    originals = {name: getattr(kernels, name) for name in spent}
+
+    def timed(name, fn):
+        def call(*args):
+            t0 = time.perf_counter()
+            out = fn(*args)
+            spent[name] += time.perf_counter() - t0
+            return out
+        return call
+
+    updater = MapUpdater(ref, UpdaterConfig(gating=False))
+    for scan, pose in scans[:10]:
+        updater.process(scan, pose)
+    updater = MapUpdater(ref, UpdaterConfig(gating=False))
+    for name, fn in originals.items():
+        setattr(kernels, name, timed(name, fn))
+    try:
+        t0 = time.perf_counter()
+        for scan, pose in scans:
+            updater.process(scan, pose)
+        total = time.perf_counter() - t0
+    finally:
+        for name, fn in originals.items():
+            setattr(kernels, name, fn)
+    n = len(scans)
+    parts = {label: sum(spent[k] for k in names) / n * 1e3 for label, names in PARTS}
+    parts["Python around the kernels"] = total / n * 1e3 - sum(parts.values())
+    return parts
+
+
 def rss_kb() -> float:
     """The process's current resident memory [KiB] (Linux), NaN elsewhere."""
     try:
@@ -121,19 +173,20 @@ def memory_child(scans_count: int) -> None:
                       "peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}))
 
 
-def main() -> None:
+def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scans", type=int, default=400)
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.memory_child:
         memory_child(args.scans)
-        return
+        return 0
     rows = []
     for beams, budget in ((720, 1.0), (1440, 2.0)):
         scans = make_scans(beams, args.scans)
         for size in (200, 2000):
             rows.append((beams, size, budget, time_scans(reference(size), scans)))
+    parts = time_parts(reference(200), make_scans(720, args.scans))
     child = subprocess.run([sys.executable, __file__, "--memory-child", "--scans", "100"],
                            check=True, capture_output=True, text=True)
     mem = json.loads(child.stdout.strip().splitlines()[-1])
@@ -152,6 +205,15 @@ def main() -> None:
               f"| {r['mean_ms']:7.3f} | {passes:21s} | {budget:9.1f} | {r['lost']:4d} "
               f"| {r['state_bytes']:11,d} |")
     print()
+    print("Where the time of a 720-beam scan goes (200 x 200 map, mean ms per scan, timers "
+          "around the kernels):")
+    print()
+    print("| part | ms | share |")
+    print("|---|---:|---:|")
+    total = sum(parts.values())
+    for label, ms in parts.items():
+        print(f"| {label} | {ms:.3f} | {ms / total:.0%} |")
+    print()
     for beams in (720, 1440):
         small, large = (r for b, s, _, r in rows if b == beams)
         print(f"{beams} beams: 2000 x 2000 / 200 x 200 = "
@@ -164,7 +226,8 @@ def main() -> None:
           f"{mem['peak_before_kb'] / 1024:.1f} MiB before the updater was made (Python, NumPy, "
           f"numba, compiled kernels, scan generation), resident then "
           f"{mem['rss_before_kb'] / 1024:.1f} MiB")
+    return int(any(r["median_ms"] > budget for _, _, budget, r in rows))
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import os
+import threading
 from pathlib import Path
 
 
@@ -17,7 +18,8 @@ def write_atomically(path, content: bytes | str) -> None:
         content = content.encode()
     path = Path(path)
     folder = path.resolve().parent
-    tmp = folder / f".{path.name}.{os.getpid()}.tmp"
+    # unique to this process and thread, so two writers of one path never share it
+    tmp = folder / f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp"
     try:
         with open(tmp, "wb") as f:
             f.write(content)

@@ -39,6 +39,27 @@ def config_from_dict(cls, values, error: type[Exception], source: str):
         raise error(f"{source}: {e}") from None
 
 
+def check_bounds(config, bounds: dict, error: type[Exception]) -> None:
+    """Every field of ``config`` named in ``bounds`` ({name: (low, high)}) is a finite number
+    (a whole one where the field is an int) within [low, high]; else an ``error`` naming the
+    key, the range and the value. A bound on every number keeps a misspelt order of magnitude
+    (a window of 1e9 degrees, a 1e300 m^2 area) from running for hours or failing deep inside a
+    kernel."""
+    import math
+
+    for f in fields(config):
+        if f.name not in bounds:
+            continue
+        low, high = bounds[f.name]
+        v = getattr(config, f.name)
+        whole = f.type in ("int", int)
+        if isinstance(v, bool) or not isinstance(v, int if whole else (int, float)) or \
+                not math.isfinite(v) or not low <= v <= high:
+            kind = "a whole number" if whole else "a number"
+            raise error(f"config key '{f.name}' must be {kind} in [{low:g}, {high:g}], "
+                        f"got {v!r}")
+
+
 def config_to_dict(config) -> dict:
     """The keys and values of a configuration dataclass, as ``config_from_dict`` takes them."""
     return asdict(config)
@@ -47,12 +68,12 @@ def config_to_dict(config) -> dict:
 def config_from_yaml(cls, path, error: type[Exception], section: str, *also: str):
     """Load a configuration from YAML holding the keys at the top level or under ``section``
     (or under one of the other names ``also``)."""
-    import yaml
+    from .files import FileInputError, load_yaml
 
     path = Path(path)
     try:
-        values = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as e:
+        values = load_yaml(path, f"{section} configuration", error) or {}
+    except (OSError, FileInputError) as e:
         raise error(f"{path}: cannot read the {section} configuration: {e}") from None
     if isinstance(values, dict) and len(values) == 1 and next(iter(values)) in (section, *also):
         values = next(iter(values.values())) or {}

@@ -29,9 +29,16 @@ import numpy as np
 import yaml
 
 from .atomic import write_atomically
+from .files import FileInputError, check_regular_file, load_yaml
 from .types import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid
 
 MODES = ("trinary", "scale", "raw")
+# What a map can be: 1 mm to 10 m cells, an origin within 1000 km, at most 64 M cells (8000 x
+# 8000, 400 m at 5 cm; the updater holds about 3.3 bytes per cell). Beyond these a map is a
+# mistake, and reading it would only fill memory.
+MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0
+MAX_ORIGIN = 1e6
+MAX_CELLS = 64_000_000
 REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 
 # What map_saver writes: these grey levels and thresholds read back as the same three states
@@ -90,25 +97,23 @@ def read_map_values(path) -> tuple[np.ndarray, MapMetadata]:
     """The cell values map_server would publish for this map (int8, grid rows: row 0 = lowest y)
     and the validated metadata. Values are 0..100 or -1, graded in ``scale`` and ``raw`` modes."""
     meta = read_map_yaml(path)
-    pixels, maxval = _read_image(meta.image, path)
+    pixels, maxval, opaque = _read_image(meta.image, path)
+    values = _pixels_to_values(pixels, maxval, meta)
+    if opaque is not None and meta.mode == "scale":     # map_server: graded and see-through
+        values[~opaque & (values > FREE) & (values < OCCUPIED)] = UNKNOWN
     # Image row 0 is the top (highest y); grid row 0 is the bottom.
-    pixels = pixels[::-1]
-    return _pixels_to_values(pixels, maxval, meta), meta
+    return values[::-1], meta
 
 
 def read_map_yaml(path) -> MapMetadata:
     """Read and validate a map_server YAML file."""
     path = Path(path)
     try:
-        text = path.read_text()
+        doc = load_yaml(path, "map file", MapFileError)
     except FileNotFoundError:
         raise MapFileError(f"{path}: map file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise MapFileError(f"{path}: cannot read map file ({e})") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise MapFileError(f"{path}: not valid YAML ({_one_line(e)})") from None
+    except FileInputError as e:
+        raise MapFileError(str(e)) from None
     if not isinstance(doc, dict):
         raise MapFileError(f"{path}: expected a mapping of map_server keys, "
                            f"got {type(doc).__name__}")
@@ -121,12 +126,16 @@ def read_map_yaml(path) -> MapMetadata:
         raise MapFileError(f"{path}: key 'image' must be a file name, got {image!r}")
     image_path = Path(image) if os.path.isabs(image) else path.resolve().parent / image
     resolution = _number(path, "resolution", doc["resolution"])
-    if not resolution > 0:
-        raise MapFileError(f"{path}: resolution must be positive, got {doc['resolution']!r}")
+    if not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
+        raise MapFileError(f"{path}: resolution must be in [{MIN_RESOLUTION:g}, "
+                           f"{MAX_RESOLUTION:g}] m/cell, got {doc['resolution']!r}")
     origin = doc["origin"]
     if not isinstance(origin, (list, tuple)) or len(origin) != 3:
         raise MapFileError(f"{path}: key 'origin' must be [x, y, yaw], got {origin!r}")
     ox, oy, yaw = (_number(path, f"origin[{i}]", v) for i, v in enumerate(origin))
+    if max(abs(ox), abs(oy)) > MAX_ORIGIN:
+        raise MapFileError(f"{path}: origin must lie within {MAX_ORIGIN:g} m of 0, got "
+                           f"[{ox:g}, {oy:g}]")
     if yaw != 0.0:
         raise MapFileError(f"{path}: origin yaw {yaw} is not zero; rotated maps are not supported")
     negate = doc["negate"]
@@ -147,9 +156,13 @@ def read_pgm(path) -> tuple[np.ndarray, int]:
     """Read a binary (P5) or ASCII (P2) PGM image: (pixels as uint16 in image rows, maxval)."""
     path = Path(path)
     try:
+        # two bytes a pixel at most, and a header
+        check_regular_file(path, "image file", 2 * MAX_CELLS + 4096)
         raw = path.read_bytes()
     except FileNotFoundError:
         raise MapFileError(f"{path}: image file not found") from None
+    except FileInputError as e:
+        raise MapFileError(str(e)) from None
     except OSError as e:
         raise MapFileError(f"{path}: cannot read image ({e})") from None
     magic = raw[:2]
@@ -160,6 +173,7 @@ def read_pgm(path) -> tuple[np.ndarray, int]:
     width, height, maxval = fields
     if width <= 0 or height <= 0:
         raise MapFileError(f"{path}: bad PGM header: image size {width} x {height}")
+    _check_size(path, width, height)
     if not 0 < maxval < 65536:
         raise MapFileError(f"{path}: bad PGM header: maxval {maxval} not in 1..65535")
     n = width * height
@@ -218,26 +232,69 @@ def _strip_comments(body: bytes) -> bytes:
     return b"\n".join(line.split(b"#", 1)[0] for line in body.splitlines())
 
 
-def _read_image(path: Path, yaml_path: Path) -> tuple[np.ndarray, int]:
+def _check_size(path: Path, width: int, height: int) -> None:
+    if width * height > MAX_CELLS:
+        raise MapFileError(f"{path}: image of {width} x {height} pixels, more than the "
+                           f"{MAX_CELLS} cells a map can have")
+
+
+def _read_image(path: Path, yaml_path: Path) -> tuple[np.ndarray, int, np.ndarray | None]:
     """PGM through :func:`read_pgm`; PNG and the other formats map_server accepts through
-    Pillow (greyscale, alpha ignored)."""
+    Pillow, read as map_server reads them: the mean of the colour channels, scaled by the
+    image's depth (8 or 16 bits); alpha marks see-through pixels, which only ``scale`` mode
+    uses (see ``_channel_mean``)."""
     try:
+        check_regular_file(path, "image file")
         with open(path, "rb") as f:
             magic = f.read(2)
     except FileNotFoundError:
         raise MapFileError(f"{yaml_path}: image file {path} not found") from None
+    except FileInputError as e:
+        raise MapFileError(str(e)) from None
     except OSError as e:
         raise MapFileError(f"{path}: cannot read image ({e})") from None
     if path.suffix.lower() in (".pgm", ".pnm") or magic in (b"P2", b"P5"):
-        return read_pgm(path)
+        return (*read_pgm(path), None)
+    import warnings
+
     from PIL import Image, UnidentifiedImageError  # only maps that are not PGM need Pillow
 
     try:
-        with Image.open(path) as im:
-            pixels = np.asarray(im.convert("L"), dtype=np.uint16)
-    except (UnidentifiedImageError, OSError) as e:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                _check_size(path, *im.size)    # from the header, before any pixel is read
+                return _channel_mean(im)
+    except (Image.DecompressionBombWarning, Image.DecompressionBombError) as e:
+        raise MapFileError(f"{path}: the image's header claims more pixels than the "
+                           f"{MAX_CELLS} cells a map can have ({_one_line(e)})") from None
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError) as e:
         raise MapFileError(f"{path}: cannot read image ({_one_line(e)})") from None
-    return pixels, 255
+
+
+def _channel_mean(im) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """(pixels, maxval, opaque): the mean of an image's colour channels, as ROS 2's map_server
+    takes it, alpha left out and reported (``opaque``, None without alpha); 16-bit
+    greyscale keeps its depth. (ROS 1's map_server averages alpha into trinary maps, which
+    reads an opaque RGBA image's unknown grey as free; that is not followed.)"""
+    mode = im.mode
+    if mode in ("P", "PA"):                 # a palette: its colours (and transparency)
+        im = im.convert("RGBA" if "transparency" in im.info or mode == "PA" else "RGB")
+    elif mode in ("1", "CMYK", "YCbCr", "LAB", "HSV"):
+        im = im.convert("L" if mode == "1" else "RGB")
+    mode, a = im.mode, np.asarray(im)
+    if mode.startswith("I;16") or (mode == "I" and a.max(initial=0) > 255):
+        return np.asarray(a, np.uint16), 65535, None
+    if mode in ("I", "F"):
+        if a.min(initial=0) < 0 or a.max(initial=0) > 255:
+            raise ValueError(f"{mode} image with values outside 0..255")
+        return np.rint(a).astype(np.uint16), 255, None
+    if a.ndim == 2:
+        return a.astype(np.uint16), 255, None
+    has_alpha = mode in ("RGBA", "LA", "RGBa", "La")
+    colour = a[..., :-1] if has_alpha else a
+    mean = np.rint(colour.astype(np.float64).mean(axis=2)).astype(np.uint16)
+    return mean, 255, (a[..., -1] == 255) if has_alpha else None
 
 
 def _pixels_to_values(pixels: np.ndarray, maxval: int, meta: MapMetadata) -> np.ndarray:
@@ -310,6 +367,12 @@ def _write_atomically(path: Path, content: bytes) -> None:
 # --- helpers -----------------------------------------------------------------------------------
 
 def _number(path: Path, key: str, value) -> float:
+    if isinstance(value, str):
+        # YAML 1.1 reads 1e-3 (no dot) as text; map_server's YAML reader takes it as a number
+        try:
+            value = float(value)
+        except ValueError:
+            pass
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise MapFileError(f"{path}: key '{key}' must be a finite number, got {value!r}")
     return float(value)

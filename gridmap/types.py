@@ -86,8 +86,9 @@ class Scan:
         if not (math.isfinite(self.angle_min) and math.isfinite(self.angle_increment)):
             raise GridError(f"scan angles must be finite (angle_min={self.angle_min}, "
                             f"angle_increment={self.angle_increment})")
-        if self.angle_increment == 0 and self.ranges.size > 1:
-            raise GridError("scan angle_increment is 0 with more than one beam")
+        if self.angle_increment == 0:
+            # (a one-beam scan too: its beam has no width to search a window in)
+            raise GridError("scan angle_increment is 0")
         if not (self.range_max > 0) or not (self.range_min >= 0) or self.range_min >= self.range_max:
             raise GridError(f"scan range limits are invalid (range_min={self.range_min}, "
                             f"range_max={self.range_max})")

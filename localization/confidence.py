@@ -39,7 +39,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from gridmap import OccupancyGrid, Pose2D, PoseVerdict, Scan
-from gridmap.config import config_from_dict, config_from_yaml, config_to_dict
+from gridmap.config import check_bounds, config_from_dict, config_from_yaml, config_to_dict
 from gridmap.distance import distance_to_occupied
 
 from .config import LocalizationError
@@ -48,6 +48,20 @@ from .sensor import select_beams
 # Why a pose was not trusted (returned by PoseCheck.check).
 UNSURE_FIT = "pose unsure: a nearby pose fits the scan better"
 UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
+
+
+# The range of every number (README, "Reliability"), and of the work one check may do.
+POSE_CHECK_BOUNDS = {
+    "max_gain": (0.0, 1.0), "min_correction": (0.0, 10.0), "min_correction_deg": (0.0, 180.0),
+    "cap": (1e-3, 5.0), "slack_cells": (0, 10), "max_beams": (2, 10_000),
+    "fine_step": (1e-4, 1.0), "fine_steps": (0, 50), "fine_step_deg": (1e-3, 45.0),
+    "fine_steps_deg": (0, 50), "coarse_step": (1e-3, 5.0), "coarse_steps": (0, 50),
+    "coarse_step_deg": (1e-3, 90.0), "coarse_steps_deg": (0, 50),
+    "max_position_std": (0.0, 100.0), "max_yaw_std_deg": (0.0, 180.0),
+    "retry_interval": (0.0, 3600.0), "polish_step": (1e-4, 0.5), "polish_step_deg": (1e-3, 10.0),
+    "polish_steps": (0, 30),
+}
+MAX_POSES = 250_000
 
 
 @dataclass(frozen=True)
@@ -83,24 +97,28 @@ class PoseCheckConfig:
 
     def __post_init__(self):
         for f in fields(self):
-            v = getattr(self, f.name)
-            if f.type == "bool":
-                if not isinstance(v, bool):
-                    raise LocalizationError(f"pose check key '{f.name}' must be true or false, "
-                                            f"got {v!r}")
-                continue
-            if f.type == "int":
-                ok = isinstance(v, int) and not isinstance(v, bool) and v >= (
-                    2 if f.name == "max_beams" else 0)
-            else:
-                ok = isinstance(v, (int, float)) and not isinstance(v, bool) and \
-                    math.isfinite(v) and v >= 0
-            if not ok:
-                raise LocalizationError(f"pose check key '{f.name}' must be a "
-                                        f"{'whole' if f.type == 'int' else 'finite'} number "
-                                        f">= 0, got {v!r}")
-        if self.cap <= 0:
-            raise LocalizationError(f"pose check key 'cap' must be > 0, got {self.cap!r}")
+            if f.type == "bool" and not isinstance(getattr(self, f.name), bool):
+                raise LocalizationError(f"pose check key '{f.name}' must be true or false, "
+                                        f"got {getattr(self, f.name)!r}")
+        try:
+            check_bounds(self, POSE_CHECK_BOUNDS, LocalizationError)
+        except LocalizationError as e:
+            raise LocalizationError(str(e).replace("config key", "pose check key")) from None
+        for grid in ("fine", "coarse", "polish"):
+            turn = getattr(self, f"{grid}_step_deg") * getattr(self, f"{grid}_steps" if grid ==
+                                                               "polish" else f"{grid}_steps_deg")
+            if turn > 180.0:
+                raise LocalizationError(f"pose check keys '{grid}_step_deg' x the {grid} grid's "
+                                        f"steps make a search of +-{turn:g} deg; at most 180")
+        if self._poses() > MAX_POSES:
+            raise LocalizationError(f"pose check search grids hold {self._poses()} poses, more "
+                                    f"than {MAX_POSES}: fewer or larger steps")
+
+    def _poses(self) -> int:
+        """Poses scored by one check (both grids) and by one polish."""
+        return ((2 * self.fine_steps + 1) ** 2 * (2 * self.fine_steps_deg + 1)
+                + (2 * self.coarse_steps + 1) ** 2 * (2 * self.coarse_steps_deg + 1)
+                + (2 * self.polish_steps + 1) ** 3)
 
     def to_dict(self) -> dict:
         return config_to_dict(self)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gridmap.config import config_from_dict, config_from_yaml, config_to_dict
+from gridmap.config import check_bounds, config_from_dict, config_from_yaml, config_to_dict
 from gridmap.errors import MapUpdatingError
 
 
@@ -18,6 +18,19 @@ class LocalizationError(MapUpdatingError, ValueError):
 
 
 RESAMPLERS = ("systematic", "stratified", "residual", "multinomial")
+# The range of every number (README, "Reliability"): wide enough for any robot, narrow enough
+# that a slip of a digit is refused rather than run for hours.
+BOUNDS = {
+    "alpha1": (0.0, 10.0), "alpha2": (0.0, 10.0), "alpha3": (0.0, 10.0), "alpha4": (0.0, 10.0),
+    "importance_factor": (1e-3, 10.0), "min_ess_fraction": (0.0, 1.0),
+    "laser_likelihood_max_dist": (1e-3, 20.0), "laser_min_range": (-1.0, 100.0),
+    "laser_max_range": (-1.0, 1000.0), "z_hit": (0.0, 1.0), "z_rand": (0.0, 1.0),
+    "sigma_hit": (1e-3, 5.0), "max_beams": (2, 10_000), "min_particles": (1, 100_000),
+    "max_particles": (1, 100_000), "pf_err": (1e-4, 1.0), "pf_z": (0.0, 10.0),
+    "kld_bin_xy": (1e-3, 10.0), "kld_bin_theta": (1e-3, math.pi), "update_min_d": (0.0, 100.0),
+    "update_min_a": (0.0, 2 * math.pi), "resample_interval": (1, 1000),
+    "recovery_alpha_slow": (0.0, 1.0), "recovery_alpha_fast": (0.0, 1.0),
+}
 MODELS = ("likelihood_field", "likelihood_field_prob")
 
 
@@ -58,6 +71,7 @@ class LocalizerConfig:
     resampler: str = "systematic"            # (not in nav2, whose sampler is multinomial)
 
     def __post_init__(self):
+        check_bounds(self, BOUNDS, LocalizationError)
         for name in ("alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand",
                      "recovery_alpha_slow", "recovery_alpha_fast", "pf_z", "min_ess_fraction",
                      "update_min_d", "update_min_a"):

@@ -25,7 +25,7 @@ def find_scenario(name_or_path: str | Path | None = None) -> Path:
         name_or_path = DEFAULT_SCENARIO
     p = Path(name_or_path)
     if p.suffix in (".yaml", ".yml") or p.exists():
-        if not p.is_file():
+        if not p.exists():         # a device or a folder is refused when it is read
             raise ScenarioNotFound(f"scenario file {p} does not exist")
         return p
     candidate = HERE / f"{name_or_path}.yaml"

@@ -44,6 +44,53 @@ def state_dir(out_dir) -> Path:
     return Path(out_dir) / "state"
 
 
+class RunFolderLock:
+    """Holds ``DIR/state/lock`` for the life of a run, so that no second run writes into the
+    same folder at once (their maps and reports would mix). An advisory ``flock``: the kernel
+    drops it when the process dies, so a killed run leaves no stale lock behind."""
+
+    def __init__(self, out_dir):
+        self.path = state_dir(out_dir) / "lock"
+        self._file = None
+
+    def __enter__(self) -> RunFolderLock:
+        import fcntl
+        import os
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        f = open(self.path, "a+")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "another process"
+            f.close()
+            raise ResumeError(f"{self.path.parent.parent}: another run is writing into this "
+                              f"folder ({holder}); wait for it or choose another --out") from None
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()}\n")
+        f.flush()
+        self._file = f
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._file is not None:
+            self._file.close()        # closing releases the lock
+            self._file = None
+
+
+def check_new_run_folder(out_dir) -> None:
+    """A new run (not --resume) may go into a missing or empty folder, or one without a run;
+    never over another run's outputs, whose files would then describe two runs."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ResumeError(f"{out}: exists and is not a folder; --out names the run's folder")
+    if (state_dir(out) / "run.json").exists():
+        raise ResumeError(f"{out}: holds a run already; continue it with --resume {out} or "
+                          "choose another --out")
+
+
 def _write_json(path: Path, data: dict) -> None:
     from .report import json_default
 
@@ -51,11 +98,13 @@ def _write_json(path: Path, data: dict) -> None:
 
 
 def _read_json(path: Path) -> dict:
+    from gridmap.files import read_text
+
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(read_text(path, "run state file"))
     except FileNotFoundError:
         raise ResumeError(f"{path}: missing") from None
-    except (OSError, ValueError) as e:
+    except (MapUpdatingError, OSError, ValueError, RecursionError) as e:
         raise ResumeError(f"{path}: unreadable ({e})") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise ResumeError(f"{path}: not a run state file of format {FORMAT}")
@@ -110,7 +159,11 @@ def resume_options(scenario, options):
         raise ResumeError(f"{options.out}: no run to resume here (no {path.name} in "
                           f"{path.parent})")
     m = _read_json(path)
-    scenario_file = Path(m["scenario_file"])
+    missing = [k for k in ("scenario_file", "scenario_sha256", "seed", "sessions", "quick",
+                           "pose_check", *CONFIG_KEYS) if k not in m]
+    if missing:
+        raise ResumeError(f"{path}: lacks {', '.join(missing)}; it cannot be resumed")
+    scenario_file = Path(str(m["scenario_file"]))
     if scenario is not None and find_scenario(scenario).resolve() != scenario_file:
         raise ResumeError(f"{path}: the run played {scenario_file}, not {scenario}")
     if not scenario_file.exists() or _sha256(scenario_file) != m["scenario_sha256"]:

@@ -34,8 +34,11 @@ def _cmd_render(args) -> int:
     import sim
 
     from .catalog import find_scenario
+    from .outputs import check_outputs
 
-    scenario = sim.load_scenario(find_scenario(args.scenario))
+    path = find_scenario(args.scenario)
+    check_outputs({"scenario": [path]}, {"--out": [args.out]})
+    scenario = sim.load_scenario(path)
     out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
     print(f"wrote {out}")
     return 0
@@ -87,9 +90,16 @@ def _rerun_recorder(args):
 
 def _cmd_update(args) -> int:
     from . import replay
+    from .outputs import check_outputs, map_files, map_inputs
     from .robot_config import load_robot_config
 
     config = load_robot_config(args.config)     # refused before the log is read
+    check_outputs({"--map": map_inputs(args.map), "--log": [args.log],
+                   "--config": [args.config] if args.config else [],
+                   "--state": [args.state] if args.state and args.state.exists() else []},
+                  {"--out": map_files(args.out), "--state": [args.state] if args.state else [],
+                   "--trajectory": [args.trajectory] if args.trajectory else []},
+                  both=("--state",))
     start = None if args.initial_pose is None else replay.parse_pose(args.initial_pose)
     summary = replay.update_from_log(
         args.map, args.log, args.out, args.state, pose_source=args.poses,
@@ -106,7 +116,9 @@ def _cmd_update(args) -> int:
 
 def _cmd_map(args) -> int:
     from . import logmap
+    from .outputs import check_outputs, map_files
 
+    check_outputs({"--log": [args.log]}, {"--out": map_files(args.out)})
     summary = logmap.map_from_log(args.log, args.out, resolution=args.resolution,
                                   pose_source=args.poses, log_format=args.format,
                                   strict=args.strict, scan_topics=args.scan_topic or None,
@@ -267,11 +279,13 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     traceback. Every package's own error derives from ``MapUpdatingError``."""
     from gridmap import MapUpdatingError
 
-    return (MapUpdatingError, FileNotFoundError, PermissionError, IsADirectoryError)
+    # OSError: the machine's answer to a write or read (a full disk, a read-only folder, no
+    # permission), which names the file; the user can act on it
+    return (MapUpdatingError, OSError)
 
 
 def main(argv: list[str] | None = None) -> int:
-    full = sys.argv if argv is None else ["mapupdate", *argv]
+    full = sys.argv if argv is None else ["mapupdate", *map(str, argv)]
     # ROS remappings and private parameters (``__name:=x``, ``_rate:=5``) are ROS's, not ours
     args = build_parser().parse_args([a for a in full[1:] if ":=" not in a])
     args.ros_argv = full
@@ -283,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - sorted into user errors and bugs just below
         if args.debug or not isinstance(exc, _user_errors()):
             raise
-        print(f"mapupdate {args.command}: error: {exc}", file=sys.stderr)
+        print(f"mapupdate {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
 
 

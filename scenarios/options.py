@@ -7,10 +7,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
+from gridmap import MapUpdatingError
+
 if TYPE_CHECKING:
     from gridmap import OccupancyGrid, Pose2D
 
     from .session import SessionResult
+
+
+class RunError(MapUpdatingError, ValueError):
+    """Run options no run can have; the message names the option."""
 
 
 @dataclass

@@ -345,22 +345,35 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
 
 
 def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
+    """A fresh updater on ``grid``, or the one saved in ``state_path`` when that exists. A
+    state holds its reference map whole, which is its fingerprint: it is refused for any other
+    map, and a configuration given with it must be the one it was made with (its buffers
+    follow that configuration)."""
     from updater import MapUpdater, UpdaterConfig
 
-    if state_path is not None and Path(state_path).exists():
-        upd = MapUpdater.load(state_path)
-        ref = upd.reference_map
-        if not ref.same_frame(grid):
-            raise LogError(f"{state_path}: the saved updater state belongs to a map of shape "
-                           f"{ref.shape} at {ref.resolution} m, origin {ref.origin}; the map "
-                           f"given has shape {grid.shape} at {grid.resolution} m, origin "
-                           f"{grid.origin}")
-        return upd, True
     if isinstance(config, dict):
         config = UpdaterConfig.from_dict(config)
     elif isinstance(config, (str, Path)):
         config = UpdaterConfig.from_yaml(config)
-    return MapUpdater(grid, config), False
+    if state_path is None or not Path(state_path).exists():
+        return MapUpdater(grid, config), False
+    upd = MapUpdater.load(state_path)
+    ref = upd.reference_map
+    if not ref.same_frame(grid):
+        raise LogError(f"{state_path}: the saved updater state belongs to a map of shape "
+                       f"{ref.shape} at {ref.resolution} m, origin {ref.origin}; the map "
+                       f"given has shape {grid.shape} at {grid.resolution} m, origin "
+                       f"{grid.origin}")
+    differ = int(np.count_nonzero(ref.data != grid.data))
+    if differ:
+        raise LogError(f"{state_path}: the saved updater state belongs to another map "
+                       f"({differ} cells differ from the map given); give the map it was "
+                       "made on, or no --state to start afresh")
+    if config is not None and config != upd.config:
+        keys = [k for k, v in config.to_dict().items() if upd.config.to_dict().get(k) != v]
+        raise LogError(f"{state_path}: the saved updater state was made with another updater "
+                       f"configuration ({', '.join(keys)} differ); give the same one or none")
+    return upd, True
 
 
 def _changes(before: OccupancyGrid, after: OccupancyGrid) -> dict:

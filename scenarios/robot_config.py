@@ -102,15 +102,11 @@ def section_config(name: str, values, source: str, where: str | None = None):
 
 
 def _read_yaml(path: Path):
-    import yaml
+    from gridmap.files import FileInputError, load_yaml
 
     try:
-        text = path.read_text()
+        return load_yaml(path, "configuration file", ConfigError)
     except FileNotFoundError:
         raise ConfigError(f"{path}: configuration file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{path}: cannot read the configuration ({e})") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None
+    except FileInputError as e:
+        raise ConfigError(str(e)) from None

@@ -23,6 +23,8 @@ from .catalog import find_scenario
 from .options import RunOptions, SessionObserver
 from .session import SessionResult, UpdateSession, map_metrics, session_seeds
 
+MAX_SEED = 2**63 - 1
+
 __all__ = ["RunOptions", "RunResult", "SessionObserver", "build_initial_map", "run_scenario",
            "run_update_session"]
 
@@ -125,19 +127,26 @@ def light_result(res: SessionResult, keep_map: bool = False) -> SessionResult:
 
 
 def default_out_dir(scenario_name: str) -> Path:
+    """``runs/<scenario>-<time>``, with a number added when a run started in the same second
+    (the scenario's name is checked to be fit for a file name when the scenario is read)."""
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return Path("runs") / f"{scenario_name}-{stamp}"
+    out = Path("runs") / f"{scenario_name}-{stamp}"
+    k = 2
+    while out.exists():
+        out, k = Path("runs") / f"{scenario_name}-{stamp}-{k}", k + 1
+    return out
 
 
 def run_scenario(scenario: str | Path | None = None, options: RunOptions | None = None) -> RunResult:
     """Play every session of a scenario, write the outputs and return the results."""
     import sim
 
-    from .report import write_outputs, write_session_maps, write_session_outputs
-
     options = options or RunOptions()
+    check_options(options)
     if options.resume:
         scenario, options = checkpoint.resume_options(scenario, options)
+    elif options.out:
+        checkpoint.check_new_run_folder(options.out)     # refused before anything is read
     path = find_scenario(scenario)
     scn = sim.load_scenario(path)
     if options.quick:
@@ -147,6 +156,30 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
                                                                        len(scn.sessions)))
     out_dir = Path(options.out) if options.out else default_out_dir(scn.name)
     out_dir.mkdir(parents=True, exist_ok=True)
+    with checkpoint.RunFolderLock(out_dir):
+        if not options.resume:       # again, now that no other run can start here
+            checkpoint.check_new_run_folder(out_dir)
+        return _play(scn, path, seed, n, out_dir, options)
+
+
+def check_options(options: RunOptions) -> None:
+    """Options no run can have, refused before anything is read or written."""
+    from .options import RunError
+
+    if options.sessions is not None and (isinstance(options.sessions, bool) or
+                                         not isinstance(options.sessions, int) or
+                                         options.sessions < 1):
+        raise RunError(f"sessions must be a whole number of at least 1, got {options.sessions!r}")
+    if options.seed is not None and (isinstance(options.seed, bool) or
+                                     not isinstance(options.seed, int) or
+                                     not 0 <= options.seed <= MAX_SEED):
+        raise RunError(f"seed must be a whole number in [0, {MAX_SEED}], got {options.seed!r}")
+
+
+def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions) -> RunResult:
+    """The sessions of a run whose folder is locked (see ``run_scenario``)."""
+    from .report import write_outputs, write_session_maps, write_session_outputs
+
     seeds = session_seeds(seed, len(scn.sessions))
     wall0 = time.perf_counter()
 

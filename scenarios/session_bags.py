@@ -48,8 +48,12 @@ class SessionBagRecorder:
         name = scenario.sessions[session].name
         path = self.out_dir / (f"{name}.bag" if self.fmt == "ros1" else name)
         self._start = BAG_EPOCH + DAY * session     # [s] this session's clock at 0
-        self._bag = BagWriter(path, self.fmt).__enter__()
-        self.paths[name] = path
+        # Written under a partial name and renamed when the session ends: a killed run leaves
+        # no bag that looks whole, and its resumed session writes the partial one anew.
+        partial = path.with_name(f".partial-{path.name}")
+        _remove(partial)
+        self._bag = BagWriter(partial, self.fmt).__enter__()
+        self._partial, self.paths[name] = partial, path
         self._bag.write_transforms([
             TransformRecord(self._start, "base_link", lidar_frame(i), lidar.mount, static=True)
             for i, lidar in enumerate(scenario.robot.lidars)])
@@ -70,3 +74,15 @@ class SessionBagRecorder:
         if self._bag is not None:
             self._bag.close()
             self._bag = None
+            final = self.paths[result.name]
+            _remove(final)                  # an earlier run's bag of this session
+            self._partial.rename(final)
+
+
+def _remove(path: Path) -> None:
+    import shutil
+
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)

@@ -10,6 +10,7 @@ session live in ``sim.validate``.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -17,6 +18,8 @@ import numpy as np
 
 from gridmap import MapUpdatingError, Pose2D
 from gridmap.suggest import did_you_mean
+
+from .validate import MAX_SESSION_S
 
 
 class ScenarioError(MapUpdatingError, ValueError):
@@ -180,6 +183,14 @@ class Scenario:
 
 # --- reading YAML ----------------------------------------------------------------------------------
 
+# What a scenario can hold: coordinates within 5 km of the origin, lists of at most 10 000
+# entries, names fit for file names. The ranges of the single values are given where each is
+# read; the size of the grid and the length of a session are checked in ``validate``.
+MAX_COORD = 5000.0
+MAX_ITEMS = 10_000
+MAX_SEED = 2**63 - 1
+NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]{0,63}")
+
 class _Reader:
     """Walks the YAML tree keeping the path of keys, so every error names where it is."""
 
@@ -204,31 +215,41 @@ class _Reader:
                 self.fail(_join(key, k), "missing required key")
         return node
 
-    def number(self, node, key: str, positive: bool = False, nonneg: bool = False) -> float:
+    def number(self, node, key: str, positive: bool = False, nonneg: bool = False,
+               within: tuple[float, float] | None = None) -> float:
+        """A finite number; ``within``: the (low, high) it must lie in, named in the error
+        (``positive`` makes low exclusive)."""
         if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
-            self.fail(key, f"expected a number, got {node!r}")
+            self.fail(key, f"expected a number, got {_short(node)}")
         if positive and not node > 0:
             self.fail(key, f"must be positive, got {node!r}")
         if nonneg and node < 0:
             self.fail(key, f"must not be negative, got {node!r}")
+        if within is not None and not within[0] <= node <= within[1]:
+            self.fail(key, f"must be in [{within[0]:g}, {within[1]:g}], got {node!r}")
         return float(node)
 
-    def integer(self, node, key: str, minimum: int = 0) -> int:
+    def integer(self, node, key: str, minimum: int = 0, maximum: int | None = None) -> int:
         if isinstance(node, bool) or not isinstance(node, int):
-            self.fail(key, f"expected an integer, got {node!r}")
-        if node < minimum:
-            self.fail(key, f"must be at least {minimum}, got {node}")
+            self.fail(key, f"expected an integer, got {_short(node)}")
+        if node < minimum or (maximum is not None and node > maximum):
+            span = f"in [{minimum}, {maximum}]" if maximum is not None else f"at least {minimum}"
+            self.fail(key, f"must be {span}, got {node}")
         return int(node)
 
-    def numbers(self, node, key: str, lengths: tuple[int, ...]) -> tuple[float, ...]:
+    def numbers(self, node, key: str, lengths: tuple[int, ...],
+                within: tuple[float, float] = (-MAX_COORD, MAX_COORD)) -> tuple[float, ...]:
         if not isinstance(node, (list, tuple)) or len(node) not in lengths:
             want = " or ".join(str(n) for n in lengths)
-            self.fail(key, f"expected a list of {want} numbers, got {node!r}")
-        return tuple(self.number(v, f"{key}[{j}]") for j, v in enumerate(node))
+            self.fail(key, f"expected a list of {want} numbers, got {_short(node)}")
+        return tuple(self.number(v, f"{key}[{j}]", within=within) for j, v in enumerate(node))
 
     def points(self, node, key: str, minimum: int = 1) -> tuple[tuple[float, float], ...]:
         if not isinstance(node, (list, tuple)) or len(node) < minimum:
-            self.fail(key, f"expected a list of at least {minimum} [x, y] points, got {node!r}")
+            self.fail(key, f"expected a list of at least {minimum} [x, y] points, "
+                           f"got {_short(node)}")
+        if len(node) > MAX_ITEMS:
+            self.fail(key, f"more than {MAX_ITEMS} points")
         return tuple(self.numbers(p, f"{key}[{j}]", (2,)) for j, p in enumerate(node))
 
     def items(self, node, key: str) -> list:
@@ -236,17 +257,33 @@ class _Reader:
             return []
         if not isinstance(node, (list, tuple)):
             self.fail(key, f"expected a list, got {type(node).__name__}")
+        if len(node) > MAX_ITEMS:
+            self.fail(key, f"more than {MAX_ITEMS} entries")
         return list(node)
 
     def string(self, node, key: str) -> str:
         if not isinstance(node, (str, int)) or isinstance(node, bool):
-            self.fail(key, f"expected a name, got {node!r}")
+            self.fail(key, f"expected a name, got {_short(node)}")
         return str(node)
+
+    def file_name(self, node, key: str) -> str:
+        """A name that becomes part of file and folder names (run folders, M_W2.yaml)."""
+        name = self.string(node, key)
+        if not NAME.fullmatch(name):
+            self.fail(key, f"{name[:40]!r} cannot name files: use letters, digits, '.', '_' "
+                           "and '-' (at most 64, not starting with '.' or '-')")
+        return name
 
     def boolean(self, node, key: str) -> bool:
         if not isinstance(node, bool):
             self.fail(key, f"expected true or false, got {node!r}")
         return node
+
+
+def _short(node) -> str:
+    """A value for an error message: never a page of it."""
+    text = repr(node)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _join(key: str, k) -> str:
@@ -264,9 +301,9 @@ def _obstacle(r: _Reader, node, key: str, movable: bool) -> Obstacle:
     if has_radius:
         if "yaw" in node:
             r.fail(_join(key, "yaw"), f"object {oid!r} is a circle and has no yaw")
-        rad = r.number(node["radius"], _join(key, "radius"), positive=True)
+        rad = r.number(node["radius"], _join(key, "radius"), positive=True, within=(0, 500))
         return Obstacle(oid, center, radius=rad, kind=kind, movable=movable)
-    size = r.numbers(node["size"], _join(key, "size"), (2,))
+    size = r.numbers(node["size"], _join(key, "size"), (2,), within=(-1000, 1000))
     if min(size) <= 0:
         r.fail(_join(key, "size"), f"object {oid!r} needs a positive size, got {list(size)}")
     yaw = r.number(node.get("yaw", 0.0), _join(key, "yaw"))
@@ -277,19 +314,22 @@ def _lidar(r: _Reader, node, key: str) -> LidarSpec:
     node = r.mapping(node, key, {"fov_deg", "beams", "range_max"},
                      {"mount", "range_min", "range_noise_std", "rate_hz"})
     d = LidarSpec()
-    mount = r.numbers(node.get("mount", [0.0, 0.0, 0.0]), _join(key, "mount"), (3,))
+    mount = r.numbers(node.get("mount", [0.0, 0.0, 0.0]), _join(key, "mount"), (3,),
+                      within=(-10.0, 10.0))
     fov = r.number(node["fov_deg"], _join(key, "fov_deg"), positive=True)
     if fov > 360:
         r.fail(_join(key, "fov_deg"), f"must be at most 360, got {fov}")
     spec = LidarSpec(
         mount=Pose2D(*mount), fov_deg=fov,
-        beams=r.integer(node["beams"], _join(key, "beams"), minimum=1),
+        beams=r.integer(node["beams"], _join(key, "beams"), minimum=2, maximum=16384),
         range_min=r.number(node.get("range_min", d.range_min), _join(key, "range_min"),
-                           nonneg=True),
-        range_max=r.number(node["range_max"], _join(key, "range_max"), positive=True),
+                           nonneg=True, within=(0.0, 100.0)),
+        range_max=r.number(node["range_max"], _join(key, "range_max"), positive=True,
+                           within=(0.0, 100.0)),
         range_noise_std=r.number(node.get("range_noise_std", d.range_noise_std),
-                                 _join(key, "range_noise_std"), nonneg=True),
-        rate_hz=r.number(node.get("rate_hz", d.rate_hz), _join(key, "rate_hz"), positive=True))
+                                 _join(key, "range_noise_std"), nonneg=True, within=(0.0, 1.0)),
+        rate_hz=r.number(node.get("rate_hz", d.rate_hz), _join(key, "rate_hz"), positive=True,
+                         within=(0.1, 100.0)))
     if spec.range_min >= spec.range_max:
         r.fail(_join(key, "range_min"), f"must be below range_max ({spec.range_max})")
     return spec
@@ -304,22 +344,24 @@ def _robot(r: _Reader, node, key: str) -> RobotSpec:
     if not lidars:
         r.fail(_join(key, "lidars"), "the robot needs at least one lidar")
     alphas = r.numbers(node.get("odometry_noise", list(d.odometry_noise)),
-                       _join(key, "odometry_noise"), (4,))
+                       _join(key, "odometry_noise"), (4,), within=(0.0, 2.0))
     if min(alphas) < 0:
         r.fail(_join(key, "odometry_noise"), f"alphas must not be negative, got {list(alphas)}")
     return RobotSpec(
         start=Pose2D(*r.numbers(node["start"], _join(key, "start"), (3,))),
         lidars=tuple(_lidar(r, n, f"{key}.lidars[{j}]") for j, n in enumerate(lidars)),
-        radius=r.number(node.get("radius", d.radius), _join(key, "radius"), positive=True),
+        radius=r.number(node.get("radius", d.radius), _join(key, "radius"), positive=True,
+                        within=(0.05, 5.0)),
         max_speed=r.number(node.get("max_speed", d.max_speed), _join(key, "max_speed"),
-                           positive=True),
+                           positive=True, within=(0.01, 5.0)),
         max_turn_rate=r.number(node.get("max_turn_rate", d.max_turn_rate),
-                               _join(key, "max_turn_rate"), positive=True),
+                               _join(key, "max_turn_rate"), positive=True, within=(0.01, 10.0)),
         max_accel=r.number(node.get("max_accel", d.max_accel), _join(key, "max_accel"),
-                           positive=True),
+                           positive=True, within=(0.01, 20.0)),
         odometry_noise=alphas,
         odometry_rate_hz=r.number(node.get("odometry_rate_hz", d.odometry_rate_hz),
-                                  _join(key, "odometry_rate_hz"), positive=True))
+                                  _join(key, "odometry_rate_hz"), positive=True,
+                                  within=(1.0, 1000.0)))
 
 
 def _change(r: _Reader, node, key: str) -> Change:
@@ -350,8 +392,9 @@ def _person(r: _Reader, node, key: str) -> PersonSpec:
     speed = r.number(node.get("speed", d.speed), _join(key, "speed"), positive=True)
     if speed > 2.5:
         r.fail(_join(key, "speed"), f"{speed} m/s is not a walking speed")
-    radius = r.number(node.get("radius", d.radius), _join(key, "radius"), positive=True)
-    count = r.integer(node.get("count", 1), _join(key, "count"), minimum=1)
+    radius = r.number(node.get("radius", d.radius), _join(key, "radius"), positive=True,
+                      within=(0.0, 1.0))
+    count = r.integer(node.get("count", 1), _join(key, "count"), minimum=1, maximum=500)
     if "route" in node:
         if "loop" in node:
             r.boolean(node["loop"], _join(key, "loop"))
@@ -368,7 +411,7 @@ def _person(r: _Reader, node, key: str) -> PersonSpec:
 def _session(r: _Reader, node, key: str) -> SessionSpec:
     node = r.mapping(node, key, {"name", "route"},
                      {"mapping", "changes", "people", "max_duration", "quick_route"})
-    name = r.string(node["name"], _join(key, "name"))
+    name = r.file_name(node["name"], _join(key, "name"))
     dur = node.get("max_duration")
     return SessionSpec(
         name=name,
@@ -379,7 +422,7 @@ def _session(r: _Reader, node, key: str) -> SessionSpec:
         people=tuple(_person(r, n, f"{key}.people[{j}]")
                      for j, n in enumerate(r.items(node.get("people"), _join(key, "people")))),
         max_duration=None if dur is None else r.number(dur, _join(key, "max_duration"),
-                                                       positive=True),
+                                                       positive=True, within=(0.0, MAX_SESSION_S)),
         quick_route=(None if node.get("quick_route") is None
                      else r.points(node["quick_route"], _join(key, "quick_route"))))
 
@@ -392,7 +435,7 @@ def _world(r: _Reader, node, key: str) -> WorldSpec:
     return WorldSpec(
         bounds=bounds,
         wall_thickness=r.number(node.get("wall_thickness", 0.13), _join(key, "wall_thickness"),
-                                positive=True),
+                                positive=True, within=(0.0, 2.0)),
         static=tuple(_obstacle(r, n, f"{key}.static[{j}]", False)
                      for j, n in enumerate(r.items(node.get("static"), _join(key, "static")))),
         movable=tuple(_obstacle(r, n, f"{key}.movable[{j}]", True)
@@ -410,13 +453,15 @@ def scenario_from_dict(data, source: str = "") -> Scenario:
     if not sessions:
         r.fail("sessions", "a scenario needs at least one session")
     scn = Scenario(
-        name=r.string(data["name"], "name"),
+        name=r.file_name(data["name"], "name"),
         world=_world(r, data["world"], "world"),
         robot=_robot(r, data["robot"], "robot"),
         sessions=tuple(_session(r, n, f"sessions[{j}]") for j, n in enumerate(sessions)),
-        seed=r.integer(data.get("seed", 0), "seed"),
-        resolution=r.number(data.get("resolution", 0.05), "resolution", positive=True),
-        physics_hz=r.number(data.get("physics_hz", 20.0), "physics_hz", positive=True),
+        seed=r.integer(data.get("seed", 0), "seed", minimum=0, maximum=MAX_SEED),
+        resolution=r.number(data.get("resolution", 0.05), "resolution", positive=True,
+                            within=(0.01, 1.0)),
+        physics_hz=r.number(data.get("physics_hz", 20.0), "physics_hz", positive=True,
+                            within=(5.0, 1000.0)),
         source=source)
     check_scenario(scn, r.fail)
     return _resolve_moves(scn)
@@ -442,17 +487,15 @@ def _resolve_moves(scn: Scenario) -> Scenario:
 
 def load_scenario(path) -> Scenario:
     """Read and validate a scenario file (YAML, the format of the design document)."""
-    import yaml
+    from gridmap.files import FileInputError, load_yaml
 
     path = Path(path)
     try:
-        text = path.read_text()
-    except OSError as e:
-        raise ScenarioError(f"{path}: cannot read the scenario file ({e.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise ScenarioError(f"{path}: not valid YAML ({e})") from None
+        data = load_yaml(path, "scenario file", ScenarioError)
+    except FileNotFoundError:
+        raise ScenarioError(f"{path}: scenario file not found") from None
+    except FileInputError as e:
+        raise ScenarioError(str(e)) from None
     return scenario_from_dict(data, str(path))
 
 

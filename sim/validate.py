@@ -18,6 +18,8 @@ from gridmap.suggest import did_you_mean
 
 from . import geometry as geo
 
+MAX_SESSION_S = 86400.0       # [s] no session may take longer to simulate (a day)
+
 Fail = Callable[[str, str], None]
 
 
@@ -34,9 +36,11 @@ def check_scenario(scn, fail: Fail) -> None:
     movable = {o.id: o for o in scn.world.movable}
     _check_objects(scn, list(scn.world.static) + list(movable.values()), keys, fail, "world")
     _check_start(scn, list(scn.world.static) + list(movable.values()), keys, fail)
+    _check_size(scn, fail)
     names = set()
     for i, s in enumerate(scn.sessions):
         skey = f"sessions[{i}]"
+        _check_duration(scn, s, skey, fail)
         if s.name in names:
             fail(f"{skey}.name", f"session name {s.name!r} is used twice")
         names.add(s.name)
@@ -64,6 +68,33 @@ def check_scenario(scn, fail: Fail) -> None:
                 if x0 < b[0] or y0 < b[1] or x1 > b[2] or y1 > b[3]:
                     fail(f"{pkey}.wander", f"rectangle {list(person.wander)} reaches outside the "
                                            f"walls {list(b)}")
+
+
+def _check_size(scn, fail: Fail) -> None:
+    """The session grids (maps, truth, buffers) must fit: at most ``MAX_CELLS`` cells."""
+    from gridmap.map_io import MAX_CELLS
+
+    x0, y0, x1, y1 = scn.world.bounds
+    pad = 2 * (scn.world.wall_thickness + 0.1)
+    cells = math.ceil((x1 - x0 + pad) / scn.resolution) * \
+        math.ceil((y1 - y0 + pad) / scn.resolution)
+    if cells > MAX_CELLS:
+        fail("world.bounds", f"{x1 - x0:g} x {y1 - y0:g} m at {scn.resolution:g} m cells make "
+                             f"{cells} cells, more than the {MAX_CELLS} a map can have")
+
+
+def _check_duration(scn, session, key: str, fail: Fail) -> None:
+    """A session must end within ``MAX_SESSION_S`` of simulated time: its ``max_duration``, or
+    the time the world gives it to drive its route (``World._default_duration``)."""
+    if session.max_duration is not None:
+        return                                  # bounded where it was read
+    start = (scn.robot.start.x, scn.robot.start.y)
+    pts = [start, *session.route]
+    length = sum(math.dist(a, b) for a, b in zip(pts, pts[1:]))
+    seconds = 3.0 * length / scn.robot.max_speed + 10.0 * len(pts) + 60.0
+    if seconds > MAX_SESSION_S:
+        fail(f"{key}.route", f"{length:.0f} m at {scn.robot.max_speed:g} m/s would take "
+                             f"{seconds / 86400:.1f} simulated days; at most one is allowed")
 
 
 def _apply_change(ch, key, movable, static_ids, keys, fail: Fail) -> None:

@@ -188,10 +188,10 @@ def test_pixel_above_maxval(tmp_path):
     expect_error(write_map(tmp_path, [[0, 200]], magic="P2", maxval=100), "m.pgm", "outside 0..100")
 
 
-@pytest.mark.parametrize("resolution", [0, -0.05])
-def test_non_positive_resolution(tmp_path, resolution):
+@pytest.mark.parametrize("resolution", [0, -0.05, 1e-200, 1e-160, 1e-4, 1e300, 11.0])
+def test_resolution_outside_what_a_map_can_have(tmp_path, resolution):
     expect_error(write_map(tmp_path, PIXELS, resolution=resolution), "m.yaml",
-                 "resolution must be positive")
+                 "resolution must be in [0.001, 10] m/cell", repr(resolution))
 
 
 def test_non_zero_yaw(tmp_path):

@@ -54,14 +54,16 @@ GOOD_YAML = ("image: m.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0
 
 @pytest.mark.parametrize("yaml_text, image, image_bytes, words", [
     ("", "m.pgm", b"P5\n1 1\n255\n\x00", ("expected a mapping",)),
-    (b"\xff\xfe\x00\x01", "m.pgm", b"P5\n1 1\n255\n\x00", ("cannot read map file",)),
+    (b"\xff\xfe\x00\x01", "m.pgm", b"P5\n1 1\n255\n\x00", ("map file is a binary file",)),
     ("!!python/object/apply:os.system ['true']\n", "m.pgm", b"", ("not valid YAML",)),
     (GOOD_YAML, "m.pgm", b"", ("bad PGM header", "magic")),
     (GOOD_YAML, "m.pgm", b"P2\n2 1\n255\n0 99999999999999999999999\n", ("outside 0..255",)),
-    (GOOD_YAML, "m.pgm", b"P5\n99999 99999\n255\n\x00", ("truncated pixel data",)),
+    (GOOD_YAML, "m.pgm", b"P5\n99999 99999\n255\n\x00", ("99999 x 99999 pixels",
+                                                           "more than the 64000000 cells")),
+    (GOOD_YAML, "m.pgm", b"P5\n4000 4000\n255\n\x00", ("truncated pixel data",)),
     (GOOD_YAML.replace("m.pgm", "m.png"), "m.png", b"\x89PNG\r\n\x1a\n\x00\x00",
      ("m.png", "cannot read image")),
-    (GOOD_YAML.replace("m.pgm", "folder"), "folder", None, ("folder", "cannot read image")),
+    (GOOD_YAML.replace("m.pgm", "folder"), "folder", None, ("folder", "image file is a folder")),
     (GOOD_YAML.replace("0.05", ".nan"), "m.pgm", b"P5\n1 1\n255\n\x00",
      ("resolution", "finite")),
 ])

@@ -265,3 +265,97 @@ def test_hostile_carmen_bytes_raise_only_log_errors(tmp_path_factory, raw):
         read_carmen(path)
     except LogError as e:
         assert "x.log" in str(e)
+
+
+# --- hostile PNG maps -----------------------------------------------------------------------------
+PNG_MODES = ["L", "LA", "RGB", "RGBA", "P", "1", "I;16"]
+
+
+@st.composite
+def png_bytes(draw):
+    """An image in any of the modes a map might come in, saved as PNG, then (sometimes) cut
+    short or with bytes overwritten."""
+    import io
+
+    from PIL import Image
+
+    mode = draw(st.sampled_from(PNG_MODES))
+    w, h = draw(st.integers(1, 12)), draw(st.integers(1, 12))
+    top = 65535 if mode == "I;16" else 255
+    bands = {"LA": 2, "RGB": 3, "RGBA": 4}.get(mode, 1)
+    shape = (h, w) if bands == 1 else (h, w, bands)
+    values = draw(arrays(np.int64, shape, elements=st.integers(0, top)))
+    if mode == "I;16":
+        im = Image.fromarray(values.astype(np.uint16))
+    elif mode in ("P", "1"):
+        im = Image.fromarray(values.astype(np.uint8), "L").convert(mode)
+    else:
+        im = Image.fromarray(values.astype(np.uint8), mode)
+    out = io.BytesIO()
+    im.save(out, "PNG")
+    raw = bytearray(out.getvalue())
+    damage = draw(st.sampled_from(["none", "cut", "overwrite"]))
+    if damage == "cut":
+        raw = raw[:draw(st.integers(0, len(raw)))]
+    elif damage == "overwrite":
+        k = draw(st.integers(0, len(raw) - 1))
+        raw[k:k + 8] = draw(st.binary(min_size=1, max_size=8))
+    return bytes(raw), damage == "none"
+
+
+@settings(max_examples=200, **SETTINGS)
+@given(png_bytes(), st.sampled_from(["trinary", "scale", "raw"]), st.booleans())
+def test_hostile_png_maps_raise_only_map_file_errors(tmp_path_factory, image, mode, negate):
+    raw, intact = image
+    folder = tmp_path_factory.mktemp("png")
+    (folder / "m.png").write_bytes(raw)
+    (folder / "m.yaml").write_text(f"image: m.png\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
+                                   f"negate: {int(negate)}\noccupied_thresh: 0.65\n"
+                                   f"free_thresh: 0.196\nmode: {mode}\n")
+    try:
+        grid = load_map(folder / "m.yaml")
+    except MapFileError as e:
+        assert "\n" not in str(e) and "m." in str(e)
+        assert not intact, f"an intact PNG was refused: {e}"
+    else:
+        assert set(np.unique(grid.data)) <= {FREE, OCCUPIED, UNKNOWN}
+
+
+# --- hostile scenario files -----------------------------------------------------------------------
+@st.composite
+def scenario_mutation(draw):
+    """The tiny room's scenario with one value somewhere replaced by a hostile one."""
+    from tiny_room import tiny_room_dict
+
+    doc = tiny_room_dict()
+    paths = []
+
+    def walk(node, path):
+        paths.append(path)
+        if isinstance(node, dict):
+            for k, v in node.items():
+                walk(v, path + (k,))
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                walk(v, path + (i,))
+    walk(doc, ())
+    path = draw(st.sampled_from(paths[1:]))
+    node = doc
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = draw(st.one_of(values, st.floats(-1e12, 1e12), st.integers(-10**9, 10**9),
+                                    st.sampled_from([1e-300, 1e300, 0, -1, "../x", [], {}])))
+    return doc
+
+
+@settings(max_examples=150, **SETTINGS)
+@given(scenario_mutation())
+def test_hostile_scenarios_raise_only_scenario_errors(doc):
+    import sim
+
+    try:
+        scn = sim.scenario_from_dict(doc, "h.yaml")
+    except sim.ScenarioError as e:
+        assert "\n" not in str(e) and str(e).startswith("h.yaml")
+    else:
+        assert scn.resolution >= 0.01 and all(ld.beams >= 2 for ld in scn.robot.lidars)

@@ -180,7 +180,7 @@ def test_bad_values_are_refused_naming_the_key():
 
 
 def test_unreadable_files_are_refused_with_their_path(tmp_path):
-    with pytest.raises(sim.ScenarioError, match="cannot read"):
+    with pytest.raises(sim.ScenarioError, match="nope.yaml: scenario file not found"):
         sim.load_scenario(tmp_path / "nope.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: [unclosed\n")

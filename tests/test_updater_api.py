@@ -288,6 +288,14 @@ def test_save_then_load_gives_identical_results(tmp_path):
         MapUpdater.load(bad)
 
 
+def test_a_failed_save_is_an_updater_error_naming_the_file(tmp_path):
+    u = MapUpdater(room()[1])
+    path = tmp_path / "missing" / "state.npz"
+    with pytest.raises(UpdaterError, match=r"missing/state\.npz: cannot save the updater state"):
+        u.save(path)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_updater_imports_only_gridmap_and_numba_lazily():
     code = ("import sys, updater; assert 'numba' not in sys.modules; "
             "bad = [m for m in sys.modules if m.split('.')[0] in "

@@ -1,5 +1,8 @@
 """Every kernel of updater._kernels against a plain NumPy / Python reference, on seeded random
-input. The references are written for clarity, not speed, and share no code with the kernels."""
+input, and the steps of updater.steps where they add something of their own: the per-beam
+distances against ALGORITHM.md's numbers written out here, and the two rules that are not in
+the paper (the seen-surface guard, fill_gaps) in a synthetic room. The references are written
+for clarity, not speed, and share no code with the kernels or the configuration."""
 
 from __future__ import annotations
 
@@ -9,7 +12,14 @@ from collections import deque
 import numpy as np
 import pytest
 
+from gridmap import Pose2D, Scan
+from updater import UpdaterConfig, steps
 from updater import _kernels as K
+
+try:
+    import synthetic_room as world
+except ImportError:  # tests collected as a package
+    from tests import synthetic_room as world
 
 FREE, OCC, UNK = 0, 100, -1
 
@@ -100,28 +110,85 @@ def test_popcount_and_bits():
     assert np.unpackbits(bits, bitorder="little").nonzero()[0].tolist() == [13]
 
 
+def test_clear_bits_clears_the_listed_cells_only():
+    rng = np.random.default_rng(9)
+    bits = rng.integers(0, 256, 40).astype(np.uint8)
+    cells = rng.choice(320, 60, replace=False).astype(np.int32)
+    expect = np.unpackbits(bits, bitorder="little").astype(bool)
+    expect[cells[:45]] = False
+    K.clear_bits(bits, cells, 45)
+    assert (np.unpackbits(bits, bitorder="little").astype(bool) == expect).all()
+
+
+# --- ALGORITHM.md's range-dependent distances, written out here ------------------------------
+def pairing_distance(r):
+    """D(r) [m]: 0.15 m at 0.2 m, slope 0.013265, at most 0.30 m."""
+    return min(0.15 + 0.013265 * (r - 0.2), 0.30)
+
+
+def new_obstacle_radius(r):
+    """tol(r) [m]: 0.10 m at 0 m rising linearly to 0.20 m at 10 m, 0.20 m beyond."""
+    return 0.10 + 0.10 * min(r, 10.0) / 10.0
+
+
+def removed_skip(r):
+    """|p_i - p_th| [m]: 2 % of the range, at least 0.15 m."""
+    return max(0.02 * r, 0.15)
+
+
+def test_written_out_distances_have_the_algorithms_values():
+    assert pairing_distance(0.2) == 0.15 and pairing_distance(20.0) == 0.30
+    assert pairing_distance(10.0) == pytest.approx(0.28, abs=1e-4)
+    assert new_obstacle_radius(0.0) == 0.10 and new_obstacle_radius(5.0) == pytest.approx(0.15)
+    assert new_obstacle_radius(10.0) == pytest.approx(0.20) and new_obstacle_radius(17.0) == 0.20
+    assert removed_skip(1.0) == 0.15 and removed_skip(7.5) == 0.15
+    assert removed_skip(10.0) == pytest.approx(0.20) and removed_skip(15.0) == pytest.approx(0.30)
+
+
+def test_per_beam_distances_follow_the_algorithm():
+    r = np.r_[np.linspace(0.05, 20.0, 400), 0.2, 5.0, 10.0, 12.0]
+    pairing, tol, skip = steps.beam_distances(r, 0.05, UpdaterConfig())
+    assert pairing == pytest.approx([pairing_distance(x) / 0.05 for x in r], abs=1e-9)
+    assert tol == pytest.approx([new_obstacle_radius(x) / 0.05 for x in r], abs=1e-9)
+    assert skip == pytest.approx([removed_skip(x) for x in r], abs=1e-12)
+
+
 # --- 1. beam classifier -----------------------------------------------------------------------
-def test_beam_endpoints():
+def test_valid_ranges():
     ranges = np.array([1.0, np.nan, np.inf, -1.0, 0.0, 0.01, 2.0, 17.99, 18.0, 25.0], np.float32)
+    r, valid = np.zeros(ranges.size), np.zeros(ranges.size, np.bool_)
+    K.valid_ranges(ranges, 0.0, 18.0, r, valid)
+    assert valid.tolist() == [True, False, False, False, False, True, True, True, False, False]
+    assert (r[valid] == ranges[valid].astype(np.float64)).all() and np.isnan(r[~valid]).all()
+    K.valid_ranges(ranges, 0.5, 18.0, r, valid)           # the scan's range_min applies too
+    assert not valid[5] and valid[0] and np.isnan(r[5])
+
+
+def test_beam_directions():
+    out = np.zeros((50, 2))
+    K.beam_directions(0.4, -1.0, 0.1, out)
+    a = [0.4 + -1.0 + j * 0.1 for j in range(50)]
+    assert out[:, 0].tolist() == pytest.approx([math.cos(x) for x in a], abs=1e-15)
+    assert out[:, 1].tolist() == pytest.approx([math.sin(x) for x in a], abs=1e-15)
+
+
+def test_beam_endpoints():
+    r = np.array([1.0, np.nan, 0.01, 2.0, 17.99, np.nan])
+    valid = ~np.isnan(r)
     sensor = np.array([10.3, 20.7, 0.4])
-    geom = np.array([-1.0, 0.1, 0.0, 18.0])
-    n = ranges.size
-    r, hx, hy, valid = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, np.bool_)
-    n_valid, walk, box = K.beam_endpoints(ranges, sensor, geom, 0.05, r, hx, hy, valid)
-    expect = [True, False, False, False, False, True, True, True, False, False]
-    assert valid.tolist() == expect and n_valid == 4
-    a = 0.4 - 1.0 + 0.1 * np.arange(n)
-    rr = ranges.astype(np.float64)
-    np.testing.assert_allclose(hx[valid], 10.3 + rr[valid] / 0.05 * np.cos(a[valid]), atol=1e-9)
-    np.testing.assert_allclose(hy[valid], 20.7 + rr[valid] / 0.05 * np.sin(a[valid]), atol=1e-9)
-    cols, rows = np.floor(hx[valid]).astype(int), np.floor(hy[valid]).astype(int)
+    a = 0.4 - 1.0 + 0.1 * np.arange(r.size)
+    directions = np.c_[np.cos(a), np.sin(a)]
+    hits = np.zeros((r.size, 2))
+    n_valid, walk, box = K.beam_endpoints(r, valid, sensor, directions, 0.05, hits)
+    assert n_valid == 4 and np.isnan(hits[~valid]).all()
+    np.testing.assert_allclose(hits[valid, 0], 10.3 + r[valid] / 0.05 * np.cos(a[valid]),
+                               atol=1e-9)
+    np.testing.assert_allclose(hits[valid, 1], 20.7 + r[valid] / 0.05 * np.sin(a[valid]),
+                               atol=1e-9)
+    cols, rows = np.floor(hits[valid, 0]).astype(int), np.floor(hits[valid, 1]).astype(int)
     assert walk == int(np.sum(np.abs(cols - 10) + np.abs(rows - 20) + 7))
     assert box == (max(cols.max(), 10) - min(cols.min(), 10) + 3) * \
         (max(rows.max(), 20) - min(rows.min(), 20) + 3)
-    # range_min of the scan applies too
-    geom[2] = 0.5
-    K.beam_endpoints(ranges, sensor, geom, 0.05, r, hx, hy, valid)
-    assert not valid[5] and valid[0]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -131,28 +198,30 @@ def test_cast_virtual_against_cell_march(seed):
     sensor = np.array([rng.uniform(5, 45), rng.uniform(5, 35), rng.uniform(-3, 3)])
     data[int(sensor[1]), int(sensor[0])] = FREE
     m = 300
-    ex, ey, ok = np.zeros(m), np.zeros(m), np.zeros(m, np.bool_)
     step = 2 * math.pi / m
+    a = sensor[2] - math.pi + step * np.arange(m)
+    directions = np.c_[np.cos(a), np.sin(a)]
+    expected, found = np.zeros((m, 2)), np.zeros(m, np.bool_)
     max_len = rng.uniform(10, 40)
-    K.cast_virtual(data, sensor, -math.pi, step, max_len, ex, ey, ok)
+    K.cast_virtual(data, sensor, directions, max_len, expected, found)
     for j in range(m):
-        p = ref_expected_point(data, sensor[0], sensor[1], sensor[2] - math.pi + j * step, max_len)
-        assert ok[j] == (p is not None)
+        p = ref_expected_point(data, sensor[0], sensor[1], a[j], max_len)
+        assert found[j] == (p is not None)
         if p is not None:
-            assert abs(ex[j] - p[0]) < 1e-6 and abs(ey[j] - p[1]) < 1e-6
+            assert abs(expected[j, 0] - p[0]) < 1e-6 and abs(expected[j, 1] - p[1]) < 1e-6
 
 
-def ref_classify(hx, hy, r, valid, ex, ey, eok, ratio, half, wrap, dpar, res):
-    m = len(ex)
+def ref_classify(hits, valid, pairing, expected, found, ratio, half, wrap):
+    m = len(expected)
     out = []
-    for i in range(len(hx)):
+    for i in range(len(hits)):
         if not valid[i]:
             out.append(False)
             continue
-        d = min(dpar[0] + dpar[2] * (r[i] - dpar[1]), dpar[3]) / res
         js = [i * ratio + o for o in range(-half, half + 1)]
         js = [j % m for j in js] if wrap else [j for j in js if 0 <= j < m]
-        out.append(not any(eok[j] and math.hypot(hx[i] - ex[j], hy[i] - ey[j]) < d for j in js))
+        out.append(not any(found[j] and math.dist(hits[i], expected[j]) < pairing[i]
+                           for j in js))
     return np.array(out)
 
 
@@ -161,120 +230,106 @@ def test_classify_against_brute_force(ratio, wrap):
     rng = np.random.default_rng(ratio * 10 + wrap)
     n = 120
     m = n * ratio
-    ex, ey = rng.uniform(0, 20, m), rng.uniform(0, 20, m)
-    eok = rng.random(m) > 0.2
+    expected = rng.uniform(0, 20, (m, 2))
+    found = rng.random(m) > 0.2
     # hit points near expected points some of the time, elsewhere otherwise
     src = (np.arange(n) * ratio + rng.integers(-12, 13, n)) % m
     near = rng.random(n) < 0.6
-    hx = np.where(near, ex[src] + rng.normal(0, 3, n), rng.uniform(0, 20, n))
-    hy = np.where(near, ey[src] + rng.normal(0, 3, n), rng.uniform(0, 20, n))
-    r = rng.uniform(0.1, 15, n)
+    hits = np.where(near[:, None], expected[src] + rng.normal(0, 3, (n, 2)),
+                    rng.uniform(0, 20, (n, 2)))
+    pairing = np.array([pairing_distance(x) / 0.05 for x in rng.uniform(0.1, 15, n)])
     valid = rng.random(n) > 0.1
-    dpar = np.array([0.15, 0.2, 0.013265, 0.30])
     out = np.zeros(n, np.bool_)
-    count = K.classify(hx, hy, r, valid, ex, ey, eok, ratio, 6, wrap, dpar, 0.05, out)
-    expect = ref_classify(hx, hy, r, valid, ex, ey, eok, ratio, 6, wrap, dpar, 0.05)
+    count = K.classify(hits, valid, pairing, expected, found, 6, wrap, out)
+    expect = ref_classify(hits, valid, pairing, expected, found, ratio, 6, wrap)
     assert out.tolist() == expect.tolist() and count == expect.sum()
     assert 10 < count < n - 10      # both outcomes exercised
 
 
 def test_classify_window_wraps_only_when_asked():
     n = 100
-    ex, ey = np.full(n, 50.0), np.full(n, 50.0)
-    eok = np.zeros(n, np.bool_)
-    eok[n - 2] = True                       # the only expected point: two beams before beam 0
-    ex[n - 2], ey[n - 2] = 10.0, 10.0
-    hx, hy = np.array([10.1] + [90.0] * (n - 1)), np.array([10.0] + [90.0] * (n - 1))
-    r, valid = np.full(n, 1.0), np.ones(n, np.bool_)
-    dpar = np.array([0.15, 0.2, 0.013265, 0.30])
+    expected = np.full((n, 2), 50.0)
+    found = np.zeros(n, np.bool_)
+    found[n - 2] = True                     # the only expected point: two beams before beam 0
+    expected[n - 2] = 10.0, 10.0
+    hits = np.full((n, 2), 90.0)
+    hits[0] = 10.1, 10.0
+    valid, pairing = np.ones(n, np.bool_), np.full(n, 3.0)
     out = np.zeros(n, np.bool_)
-    K.classify(hx, hy, r, valid, ex, ey, eok, 1, 4, False, dpar, 0.05, out)
+    K.classify(hits, valid, pairing, expected, found, 4, False, out)
     assert out[0]
-    K.classify(hx, hy, r, valid, ex, ey, eok, 1, 4, True, dpar, 0.05, out)
+    K.classify(hits, valid, pairing, expected, found, 4, True, out)
     assert not out[0]
 
 
-def ref_run_filter(change, min_run, wrap):
-    n = len(change)
-    keep = np.zeros(n, bool)
-    if wrap and n and all(change):
-        keep[:] = n >= min_run
-        return keep
-    runs, start = [], None
-    for i in range(n):
-        if change[i] and start is None:
-            start = i
-        if not change[i] and start is not None:
-            runs.append(list(range(start, i)))
-            start = None
-    if start is not None:
-        runs.append(list(range(start, n)))
-    if wrap and len(runs) > 1 and runs[0][0] == 0 and runs[-1][-1] == n - 1:
-        runs[0] = runs.pop() + runs[0]
-    for run in runs:
-        if len(run) >= min_run:
-            keep[run] = True
-    return keep
+def one_beam_towards_a_wall(r, gap, cfg):
+    """A map with an occupied column at col 460 and one beam of range r [m] along +x that
+    ends ``gap`` [m] in front of it (behind it when negative). Returns the classified beams."""
+    data = np.zeros((20, 480), np.int8)
+    data[:, 460] = OCC
+    gx = 460.0 - (gap + r) / 0.05
+    scan = Scan(np.array([r], np.float32), 0.0, 0.01, 0.0, 30.0)
+    return steps.classify_beams(data, scan, np.array([gx, 10.5, 0.0]), 0.05, cfg,
+                                steps.Workspace())
 
 
-@pytest.mark.parametrize("wrap", [False, True])
-def test_run_filter_against_reference(wrap):
-    rng = np.random.default_rng(3)
-    out = np.zeros(60, np.bool_)
-    for trial in range(300):
-        change = rng.random(60) < rng.uniform(0.2, 0.9)
-        min_run = int(rng.integers(1, 6))
-        kept = K.run_filter(change, min_run, wrap, out)
-        expect = ref_run_filter(change, min_run, wrap)
-        assert out.tolist() == expect.tolist() and kept == expect.sum()
-    change = np.ones(60, np.bool_)
-    assert K.run_filter(change, 3, True, out) == 60 and out.all()
+@pytest.mark.parametrize("r", [0.2, 1.0, 5.0, 10.0, 12.0, 20.0])
+def test_classifier_verdict_flips_exactly_at_the_pairing_distance(r):
+    # The beam's own virtual beam ends where the measured one would on M; the only thing
+    # that decides the verdict is how far the hit lies from that expected point.
+    r = float(np.float32(r))                 # a scan holds float32 ranges
+    cfg = UpdaterConfig(max_range=25.0, min_run=1)
+    for side in (1.0, -1.0):
+        for factor, change in ((1 - 1e-6, False), (1 + 1e-6, True)):
+            beams = one_beam_towards_a_wall(r, side * factor * pairing_distance(r), cfg)
+            assert beams.valid == 1 and beams.raw_changes == int(change), (r, side, factor)
+            assert beams.verdict[0] == (K.CHANGE if change else K.UNCHANGED)
 
 
-def test_run_filter_wrap_joins_scan_ends():
-    change = np.zeros(20, np.bool_)
-    change[[0, 1, 19]] = True
-    out = np.zeros(20, np.bool_)
-    assert K.run_filter(change, 3, False, out) == 0
-    assert K.run_filter(change, 3, True, out) == 3 and out[[0, 1, 19]].all()
+# --- walks along beams ------------------------------------------------------------------------
+def ref_walk(data, sensor, hit, reach, drop_last):
+    """The cells from the sensor to the point at ``reach`` of the way to the hit."""
+    h, w = data.shape
+    tx = sensor[0] + reach * (hit[0] - sensor[0])
+    ty = sensor[1] + reach * (hit[1] - sensor[1])
+    cells = ref_segment_cells(sensor[0], sensor[1], tx, ty, h, w)
+    if drop_last and 0 <= tx < w and 0 <= ty < h:
+        cells = cells[:-1]
+    return cells
 
 
-def ref_verdicts(valid, keep, n_skip, wrap):
-    n = len(valid)
-    out = []
-    for i in range(n):
-        if keep[i]:
-            out.append(K.CHANGE)
-        elif not valid[i]:
-            out.append(K.INVALID)
-        else:
-            near = [j for j in range(n) if keep[j] and
-                    (min(abs(i - j), n - abs(i - j)) if wrap else abs(i - j)) <= n_skip]
-            out.append(K.SKIPPED if near else K.UNCHANGED)
-    return out
+@pytest.mark.parametrize("seed", [0, 1])
+def test_walk_against_reference(seed):
+    rng = np.random.default_rng(seed)
+    data = np.zeros((40, 50), np.int8)
+    cells = np.zeros((2, 200), np.int64)
+    for trial in range(500):
+        sensor = np.array([rng.uniform(-5, 55), rng.uniform(-5, 45), 0.0])
+        hit = sensor[:2] + rng.uniform(-40, 40, 2)
+        reach, drop_last = rng.uniform(0.2, 1.0), bool(rng.random() < 0.5)
+        n = K.walk(data, sensor, hit, reach, drop_last, cells)
+        got = list(zip(cells[0, :n].tolist(), cells[1, :n].tolist()))
+        assert got == ref_walk(data, sensor, hit, reach, drop_last)
 
 
-@pytest.mark.parametrize("wrap", [False, True])
-def test_beam_verdicts_against_reference(wrap):
-    rng = np.random.default_rng(4)
-    out = np.zeros(50, np.int8)
-    for trial in range(200):
-        valid = rng.random(50) > 0.2
-        keep = valid & (rng.random(50) < 0.1)
-        n_skip = int(rng.integers(0, 4))
-        K.beam_verdicts(valid, keep, n_skip, wrap, out)
-        assert out.tolist() == ref_verdicts(valid, keep, n_skip, wrap)
-
-
-def test_invalid_beam_after_change_does_not_stop_unchanged_flags():
-    # The authors' defect: an invalid beam two past a change silenced the rest of the scan.
-    valid = np.ones(12, np.bool_)
-    valid[5] = False
-    keep = np.zeros(12, np.bool_)
-    keep[3] = True
-    out = np.zeros(12, np.int8)
-    K.beam_verdicts(valid, keep, 2, False, out)
-    assert out.tolist() == [1, 2, 2, 3, 2, 0, 1, 1, 1, 1, 1, 1]
+@pytest.mark.parametrize("free", [True, False])
+def test_flag_listed_against_reference(free):
+    rng = np.random.default_rng(10 + free)
+    data = random_map(rng, h=20, w=20, p_occ=0.3, p_unk=0.2)
+    marks = np.zeros(50, np.uint8)
+    out = np.zeros(401, np.int32)
+    flag = K.flag_free_listed if free else K.flag_occupied_listed
+    n, expect, seen = 0, [], set()
+    for trial in range(30):
+        count = int(rng.integers(0, 40))
+        cells = np.stack([rng.integers(0, 20, 45), rng.integers(0, 20, 45)]).astype(np.int64)
+        n = flag(data, cells, count, marks, out, n)
+        for r, c in zip(cells[0, :count], cells[1, :count]):
+            if (data[r, c] == FREE) == free and r * 20 + c not in seen:
+                seen.add(r * 20 + c)
+                expect.append(r * 20 + c)
+    assert out[:n].tolist() == expect and len(expect) > 50
+    assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == sorted(expect)
 
 
 # --- 2./3. evaluators -------------------------------------------------------------------------
@@ -287,51 +342,53 @@ def test_disc_is_free_against_brute_force():
         assert K.disc_is_free(data, px, py, rad) == ref_disc_is_free(data, px, py, rad)
 
 
-def ref_flag_changed(data, hx, hy, r, verdict, sensor, tpar, res):
-    h, w = data.shape
-    cells, n_new = [], 0
-    for i in range(len(hx)):
-        if verdict[i] != K.CHANGE:
-            continue
-        tol = tpar[0] + (tpar[1] - tpar[0]) * min(r[i] / tpar[2], 1.0)
-        if ref_disc_is_free(data, hx[i], hy[i], tol / res):
-            cell = math.floor(hy[i]) * w + math.floor(hx[i])
+def ref_flag_new(data, hits, tol, verdict):
+    w = data.shape[1]
+    cells = []
+    for i in range(len(hits)):
+        if verdict[i] == K.CHANGE and ref_disc_is_free(data, hits[i, 0], hits[i, 1], tol[i]):
+            cell = math.floor(hits[i, 1]) * w + math.floor(hits[i, 0])
             if cell not in cells:
                 cells.append(cell)
-                n_new += 1
-        skip = max(tpar[3] * r[i], tpar[4])
-        if skip >= r[i]:
+    return cells
+
+
+def ref_flag_removed(data, sensor, hits, reach, verdict):
+    w = data.shape[1]
+    cells = []
+    for i in range(len(hits)):
+        if verdict[i] != K.CHANGE or not reach[i] > 0:
             continue
-        f = 1 - skip / r[i]
-        tx, ty = sensor[0] + f * (hx[i] - sensor[0]), sensor[1] + f * (hy[i] - sensor[1])
-        walk = ref_segment_cells(sensor[0], sensor[1], tx, ty, h, w)
-        if 0 <= tx < w and 0 <= ty < h:
-            walk = walk[:-1]
-        for rr, cc in walk:
+        for rr, cc in ref_walk(data, sensor, hits[i], reach[i], True):
             if data[rr, cc] != FREE and rr * w + cc not in cells:
                 cells.append(rr * w + cc)
-    return cells, n_new
+    return cells
 
 
-def ref_flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin=0.0):
+def ref_flag_occupied(data, hits, verdict):
     h, w = data.shape
     cells = []
-    for i in range(len(hx)):
+    for i in range(len(hits)):
         if verdict[i] != K.UNCHANGED:
             continue
-        frac = free_fraction
-        if free_margin > 0 and r[i] > free_margin:
-            frac = max(frac, 1 - free_margin / r[i])
-        r0, c0 = math.floor(hy[i]), math.floor(hx[i])
+        r0, c0 = math.floor(hits[i, 1]), math.floor(hits[i, 0])
         for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
             rr, cc = r0 + dr, c0 + dc
             if 0 <= rr < h and 0 <= cc < w and data[rr, cc] != FREE and rr * w + cc not in cells:
                 cells.append(rr * w + cc)
-        tx, ty = sensor[0] + frac * (hx[i] - sensor[0]), sensor[1] + frac * (hy[i] - sensor[1])
-        for rr, cc in ref_segment_cells(sensor[0], sensor[1], tx, ty, h, w):
-            if data[rr, cc] == FREE and rr * w + cc not in cells:
-                cells.append(rr * w + cc)
     return cells
+
+
+def ref_flag_free(data, sensor, hits, reach, verdict):
+    w = data.shape[1]
+    cells = {}                  # a dict keeps the order of first flags
+    for i in range(len(hits)):
+        if verdict[i] != K.UNCHANGED:
+            continue
+        for rr, cc in ref_walk(data, sensor, hits[i], reach[i], False):
+            if data[rr, cc] == FREE:
+                cells.setdefault(rr * w + cc)
+    return list(cells)
 
 
 def _evaluator_input(seed):
@@ -340,37 +397,195 @@ def _evaluator_input(seed):
     sensor = np.array([rng.uniform(10, 40), rng.uniform(10, 30), 0.3])
     r, hx, hy = random_hits(rng, 80, *data.shape, sensor)
     verdict = rng.choice(np.array([K.INVALID, K.UNCHANGED, K.SKIPPED, K.CHANGE], np.int8), 80)
-    return data, sensor, r, hx, hy, verdict
+    return data, sensor, r, np.c_[hx, hy], verdict
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
-def test_flag_changed_against_reference(seed):
-    data, sensor, r, hx, hy, verdict = _evaluator_input(seed)
+def test_flag_changed_kernels_against_reference(seed):
+    data, sensor, r, hits, verdict = _evaluator_input(seed)
     data[data.shape[0] // 2:] = FREE      # an open half, where new obstacles can be flagged
-    tpar = np.array([0.10, 0.20, 10.0, 0.02, 0.15])
+    tol = np.array([new_obstacle_radius(x) / 0.05 for x in r])
+    reach = np.array([1 - removed_skip(x) / x for x in r])
     marks = np.zeros((data.size + 7) // 8, np.uint8)
-    rows, cols = np.zeros(300, np.int64), np.zeros(300, np.int64)
+    cells = np.zeros((2, 300), np.int64)
     out = np.zeros(5000, np.int32)
-    n, n_new = K.flag_changed(data, hx, hy, r, verdict, sensor, tpar, 0.05, marks, rows, cols,
-                              out)
-    cells, expect_new = ref_flag_changed(data, hx, hy, r, verdict, sensor, tpar, 0.05)
-    assert sorted(out[:n].tolist()) == sorted(cells) and n_new == expect_new
-    assert n_new > 0 and n > n_new
+    n = K.flag_removed_obstacles(data, sensor, hits, reach, verdict, marks, cells, out)
+    n_all = K.flag_new_obstacles(data, hits, tol, verdict, marks, out, n)
+    removed = ref_flag_removed(data, sensor, hits, reach, verdict)
+    new = ref_flag_new(data, hits, tol, verdict)
+    assert out[:n].tolist() == removed and sorted(out[n:n_all].tolist()) == sorted(new)
+    assert n > 0 and n_all > n and (reach <= 0).any()     # short beams walk nowhere
     # every listed cell is marked, and only those
-    assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == sorted(cells)
+    assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == \
+        sorted(removed + new)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 @pytest.mark.parametrize("free_fraction, free_margin", [(0.98, 0.0), (0.9, 0.075)])
-def test_flag_unchanged_against_reference(seed, free_fraction, free_margin):
-    data, sensor, r, hx, hy, verdict = _evaluator_input(seed)
+def test_flag_unchanged_kernels_against_reference(seed, free_fraction, free_margin):
+    data, sensor, r, hits, verdict = _evaluator_input(seed)
+    occupied = np.argwhere(data == OCC)[:len(hits):4]     # some hits on occupied cells
+    hits[:len(occupied)] = occupied[:, ::-1] + 0.5
+    reach = np.array([max(free_fraction, 1 - free_margin / x) if 0 < free_margin < x
+                      else free_fraction for x in r])
     marks = np.zeros((data.size + 7) // 8, np.uint8)
-    rows, cols = np.zeros(300, np.int64), np.zeros(300, np.int64)
+    cells = np.zeros((2, 300), np.int64)
     out = np.zeros(5000, np.int32)
-    n = K.flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin, marks,
-                         rows, cols, out)
-    cells = ref_flag_unchanged(data, hx, hy, r, verdict, sensor, free_fraction, free_margin)
-    assert sorted(out[:n].tolist()) == sorted(cells) and n > 0
+    n = K.flag_free_unchanged(data, sensor, hits, reach, verdict, marks, cells, out)
+    n_all = K.flag_occupied_unchanged(data, hits, verdict, marks, out, n)
+    assert out[:n].tolist() == ref_flag_free(data, sensor, hits, reach, verdict) and n > 0
+    assert sorted(out[n:n_all].tolist()) == sorted(ref_flag_occupied(data, hits, verdict))
+    assert n_all > n
+
+
+def change_beam(sensor, r, hit, cfg):
+    """Beams holding one detected-change beam of range r [m] ending at ``hit`` [grid units],
+    with the distances the steps derive from ``cfg``."""
+    ranges = np.array([r])
+    pairing, tol, skip = steps.beam_distances(ranges, 0.05, cfg)
+    return steps.Beams(np.asarray(sensor, float), ranges, np.array([hit], float), pairing,
+                       tol, skip, np.full(1, cfg.free_fraction), np.array([K.CHANGE], np.int8),
+                       1, 1, 1, 1000)
+
+
+def flagged_changed(data, beams):
+    ws = steps.Workspace()
+    ws.for_beams(1, 1, 1000)
+    ws.for_flags(1000)
+    marks = np.zeros((data.size + 7) // 8, np.uint8)
+    n, n_new = steps.flag_changed_cells(data, beams, marks, ws)
+    return ws.changed[:n].tolist(), n_new
+
+
+@pytest.mark.parametrize("r", [0.5, 5.0, 10.0, 15.0])
+def test_new_obstacle_flag_flips_exactly_at_the_new_obstacle_radius(r):
+    data = np.zeros((30, 340), np.int8)
+    data[21, 320] = OCC                 # the only occupied cell, y in [21, 22)
+    for factor, flagged in ((1 - 1e-6, False), (1 + 1e-6, True)):
+        hit = (320.5, 21.0 - factor * new_obstacle_radius(r) / 0.05)
+        beams = change_beam((hit[0] - r / 0.05, hit[1], 0.0), r, hit, UpdaterConfig())
+        cells, n_new = flagged_changed(data, beams)
+        hit_cell = math.floor(hit[1]) * 340 + 320
+        assert (cells, n_new) == (([hit_cell], 1) if flagged else ([], 0)), (r, factor)
+
+
+@pytest.mark.parametrize("r", [1.0, 5.0, 10.0, 15.0])
+def test_removed_obstacle_walk_ends_exactly_at_p_th(r):
+    data = np.zeros((10, 340), np.int8)
+    data[5, 300] = OCC                  # on the beam, x in [300, 301)
+    for factor, flagged in ((1 - 1e-6, False), (1 + 1e-6, True)):
+        # p_th = the hit less the skip: just inside the occupied cell (its last cell, left
+        # out), or just past it
+        hit = (301.0 + factor * removed_skip(r) / 0.05, 5.5)
+        beams = change_beam((hit[0] - r / 0.05, 5.5, 0.0), r, hit, UpdaterConfig())
+        cells, _ = flagged_changed(data, beams)
+        assert (5 * 340 + 300 in cells) == flagged, (r, factor)
+
+
+# --- the rules not in the paper, as steps, in a synthetic room -------------------------------
+SOLID = world.Rect(3.0125, 3.0125, 4.0125, 3.6125)     # in M; in the world 0.12 m further north
+HOLLOW = world.Rect(6.5125, 2.5125, 8.0125, 3.5125)    # in M, outline only; gone from the world
+
+
+def room_scene(seed):
+    """M: the room with SOLID and HOLLOW (its interior unknown: an enclosed region). One
+    720-beam scan of the world from a seeded random pose north of the boxes, a seeded random
+    tenth of its beams replaced by random ranges and a few by NaN. Returns (M's cells, scan,
+    sensor (gx, gy, yaw))."""
+    rng = np.random.default_rng(seed)
+    walls = world.room_walls()
+    ref = world.rasterise(walls + [SOLID], hollow=[HOLLOW])
+    moved = world.Rect(SOLID.x0, SOLID.y0 + 0.12, SOLID.x1, SOLID.y1 + 0.12)
+    pose = Pose2D(rng.uniform(2.0, 9.0), rng.uniform(5.0, 9.0), rng.uniform(-math.pi, math.pi))
+    scan = world.full_scan(walls + [moved], pose, 0.0)
+    ranges = scan.ranges.copy()
+    pick = rng.random(ranges.size)
+    ranges[pick < 0.1] = rng.uniform(0.1, 8.0, (pick < 0.1).sum())
+    ranges[pick > 0.98] = np.nan
+    scan = Scan(ranges, scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max)
+    return ref.data, scan, steps.to_grid(pose, ref.origin, ref.resolution)
+
+
+def unpack(bits, shape):
+    return np.unpackbits(bits, bitorder="little")[:shape[0] * shape[1]].reshape(shape) == 1
+
+
+def ref_seen_surfaces(data, enclosed, hits, verdict, radius):
+    """Cells (H, W) within ``radius`` of a valid hit that are occupied, or unknown and not in
+    an enclosed region: the distance from a hit to a cell is to the cell's nearest point."""
+    rows, cols = np.mgrid[0:data.shape[0], 0:data.shape[1]]
+    near = np.zeros(data.shape, bool)
+    for (x, y), v in zip(hits, verdict):
+        if v != K.INVALID:
+            dx = np.maximum.reduce([cols - x, np.zeros(data.shape), x - cols - 1.0])
+            dy = np.maximum.reduce([rows - y, np.zeros(data.shape), y - rows - 1.0])
+            near |= dx**2 + dy**2 <= radius**2
+    return near & ((data == OCC) | ((data == UNK) & ~enclosed))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_seen_surface_guard_step_against_reference(seed):
+    data, scan, sensor = room_scene(seed)
+    cfg = UpdaterConfig()
+    enclosed_bits, _ = steps.enclosed_unknown(data, 10**6)
+    enclosed = unpack(enclosed_bits, data.shape)
+    ws = steps.Workspace()
+    beams = steps.classify_beams(data, scan, sensor, 0.05, cfg, ws)
+    assert beams.changes > 0 and enclosed.sum() > 100
+    marks = np.zeros((data.size + 7) // 8, np.uint8)
+    n_guarded = steps.guard_seen_surfaces(data, beams, cfg, 0.05, marks, enclosed_bits, ws)
+    guarded = ref_seen_surfaces(data, enclosed, beams.hits, beams.verdict, 0.075 / 0.05)
+    assert (unpack(marks, data.shape) == guarded).all() and n_guarded == guarded.sum() > 50
+    # the removed-obstacle walk passes the guarded cells by, and only those
+    n, n_new = steps.flag_changed_cells(data, beams, marks, ws)
+    reach = np.array([1 - removed_skip(r) / r for r in beams.ranges])
+    removed = set(ref_flag_removed(data, sensor, beams.hits, reach, beams.verdict))
+    guarded = set(np.flatnonzero(guarded).tolist())
+    new = set(ref_flag_new(data, beams.hits, beams.tol, beams.verdict))
+    flagged = ws.changed[:n].tolist()
+    assert set(flagged) == (removed - guarded) | new and len(set(flagged)) == n
+    assert removed & guarded and removed - guarded        # the guard bites, and not everywhere
+    steps.release_seen_surfaces(marks, n_guarded, ws)
+    assert set(np.flatnonzero(unpack(marks, data.shape)).tolist()) == set(ws.changed[:n].tolist())
+
+
+def ref_gap_cells(data, hits, verdict, k):
+    """Hit cells of agreeing beams with a free square of k cells each way around them in M."""
+    h, w = data.shape
+    cells = set()
+    for (x, y), v in zip(hits, verdict):
+        if v != K.UNCHANGED:
+            continue
+        row, col = math.floor(y), math.floor(x)
+        if k <= row < h - k and k <= col < w - k and \
+                (data[row - k:row + k + 1, col - k:col + k + 1] == FREE).all():
+            cells.add(row * w + col)
+    return cells
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fill_gaps_step_against_reference(seed):
+    data, scan, sensor = room_scene(seed)
+    cfg = UpdaterConfig(fill_gaps=True)
+    ws = steps.Workspace()
+    beams = steps.classify_beams(data, scan, sensor, 0.05, cfg, ws)
+    marks = np.zeros((data.size + 7) // 8, np.uint8)
+    n, _ = steps.flag_changed_cells(data, beams, marks, ws)
+    before = ws.changed[:n].tolist()
+    n_all, n_gaps = steps.fill_gaps(data, beams, cfg, 0.05, marks, ws, n)
+    gaps = ref_gap_cells(data, beams.hits, beams.verdict, 1) - set(before)
+    assert ws.changed[:n].tolist() == before and n_gaps == n_all - n == len(gaps) > 0
+    assert set(ws.changed[n:n_all].tolist()) == gaps
+    # agreeing beams walk their free cells to 0.075 m short of the hit where that is further
+    # than 98 % of the range (beyond 3.75 m); checked on a seeded random sixth of the beams
+    reach = np.array([max(0.98, 1 - 0.075 / r) if r > 0.075 else 0.98 for r in beams.ranges])
+    some = np.random.default_rng(seed).random(len(reach)) < 1 / 6
+    beams.verdict[~some & (beams.verdict == K.UNCHANGED)] = K.SKIPPED
+    assert ((reach > 0.98) & (beams.verdict == K.UNCHANGED)).sum() > 10
+    n_un = steps.flag_unchanged_cells(data, beams, np.zeros_like(marks), ws)
+    expect = ref_flag_free(data, sensor, beams.hits, reach, beams.verdict) + \
+        ref_flag_occupied(data, beams.hits, beams.verdict)
+    assert sorted(ws.unchanged[:n_un].tolist()) == sorted(expect)
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -403,7 +618,7 @@ def test_push_flags_against_reference():
     unchanged = rng.choice(500, 200, replace=False).astype(np.int32)
     ch_marks, un_marks = np.full(63, 255, np.uint8), np.full(63, 255, np.uint8)
     moved = np.zeros(280, np.int32)
-    n = K.push_flags(hist, changed, 80, unchanged, 200, 0x3FF, 7, ch_marks, un_marks, moved)
+    n = K.push_flags(hist, changed, unchanged, 0x3FF, 7, ch_marks, un_marks, moved)
     expect = before.astype(int)
     log = []
     for idx, flag in [(i, 1) for i in changed] + [(i, 0) for i in unchanged]:
@@ -436,8 +651,8 @@ def test_decide_incremental_equals_full_map(support):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
-        n = K.push_flags(hist, ch, ch.size, un, un.size, 0x3FF, 7, marks[0], marks[1], moved)
-        count += K.decide(hist, flat, decided, moved, n, 30, 0x3FF, 7, support)
+        n = K.push_flags(hist, ch, un, 0x3FF, 7, marks[0], marks[1], moved)
+        count += K.decide(hist, flat, decided, moved[:n], 30, 0x3FF, 7, support)
         expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support)
         got = np.unpackbits(decided, bitorder="little")[:900].reshape(30, 30).astype(bool)
         assert (got == expect).all() and count == expect.sum()

@@ -12,5 +12,5 @@ from .config import UpdaterConfig, UpdaterError
 from .map_updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, MapUpdater,
                           ScanReport, ScanStatus)
 
-__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "ScanStatus", "BEAM_INVALID",
-           "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]
+__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "ScanStatus",
+           "BEAM_INVALID", "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]

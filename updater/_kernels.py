@@ -1,10 +1,11 @@
 """numba kernels of the map updater. Arrays and scalars only; each is called once per scan.
 
 Units: points are in grid units, (gx, gy) = ((x - ox) / res, (y - oy) / res), so a point lies in
-cell (row, col) = (floor(gy), floor(gx)); ranges and distances that come from the configuration
-are in metres and are divided by ``res`` here. Cells are addressed by their flat index
-``row * width + col``. Per-scan marks and the decided state are bit planes: one bit per cell,
-packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
+cell (row, col) = (floor(gy), floor(gx)); hit points and expected points are (N, 2) arrays of
+such points. Per-beam distances arrive in grid units, computed by the caller from the
+configuration; walks run from the sensor to a fraction (``reach``) of the way to a hit. Cells
+are addressed by their flat index ``row * width + col``. Per-scan marks and the decided state
+are bit planes: one bit per cell, packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
 """
 
 import numpy as np
@@ -24,6 +25,7 @@ CHANGE = 3
 # --- bits and counts --------------------------------------------------------------------------
 @njit(cache=True)
 def bit_get(bits, idx):
+    """The bit of cell ``idx``."""
     return (bits[idx >> 3] >> (idx & 7)) & 1
 
 
@@ -39,7 +41,16 @@ def test_and_set(bits, idx):
 
 
 @njit(cache=True)
+def clear_bits(bits, cells, n):
+    """Clear the bits of the first ``n`` listed cells, and only those."""
+    for k in range(n):
+        idx = cells[k]
+        bits[idx >> 3] = bits[idx >> 3] & ~(1 << (idx & 7))
+
+
+@njit(cache=True)
 def popcount16(v):
+    """The number of set bits of a uint16."""
     x = np.int64(v)
     x = x - ((x >> 1) & 0x5555)
     x = (x & 0x3333) + ((x >> 2) & 0x3333)
@@ -49,76 +60,92 @@ def popcount16(v):
 
 # --- 1. beam classifier -----------------------------------------------------------------------
 @njit(cache=True)
-def beam_endpoints(ranges, sensor, geom, res, out_r, out_hx, out_hy, out_valid):
-    """Valid beams and their hit points. ``sensor`` = (gx, gy, yaw [rad]); ``geom`` =
-    (angle_min [rad], angle_increment [rad], r_lo [m], r_hi [m]). A beam is valid when its range
-    r is finite, r > 0, r >= r_lo and r < r_hi. Returns (valid beams, the summed lengths of
-    their walks in cells, the cell count of the box around the sensor and the hits)."""
+def valid_ranges(ranges, r_lo, r_hi, out_r, out_valid):
+    """A beam is valid when its range r [m] is finite, r > 0 (r = 0 is no hit), r >= r_lo and
+    r < r_hi. ``out_r`` gets the ranges as float64, NaN for invalid beams."""
+    for i in range(ranges.shape[0]):
+        r = np.float64(ranges[i])
+        ok = np.isfinite(r) and r > 0.0 and r >= r_lo and r < r_hi
+        out_valid[i] = ok
+        out_r[i] = r if ok else np.nan
+
+
+@njit(cache=True)
+def beam_directions(yaw, angle_min, step, out):
+    """(cos, sin) of beam j at ``yaw + angle_min + j * step`` [rad], for every row of ``out``."""
+    for j in range(out.shape[0]):
+        a = yaw + angle_min + j * step
+        out[j, 0] = np.cos(a)
+        out[j, 1] = np.sin(a)
+
+
+@njit(cache=True)
+def beam_endpoints(ranges, valid, sensor, directions, res, out_hits):
+    """Hit points of the valid beams: the sensor (gx, gy) plus ``ranges`` [m] / ``res`` along
+    ``directions``; NaN for invalid beams. Returns (valid beams, the summed lengths of their
+    walks in cells, the cell count of the box around the sensor and the hits): bounds on the
+    cells any evaluator can flag."""
     gx0, gy0 = sensor[0], sensor[1]
-    c_lo, c_hi = int(np.floor(gx0)), int(np.floor(gx0))
-    r_lo, r_hi = int(np.floor(gy0)), int(np.floor(gy0))
+    c0, r0 = int(np.floor(gx0)), int(np.floor(gy0))
+    c_lo, c_hi, r_lo, r_hi = c0, c0, r0, r0
     n_valid = 0
     walk = 0
     for i in range(ranges.shape[0]):
-        r = np.float64(ranges[i])
-        ok = np.isfinite(r) and r > 0.0 and r >= geom[2] and r < geom[3]
-        out_valid[i] = ok
-        if not ok:
+        if not valid[i]:
+            out_hits[i, 0] = out_hits[i, 1] = np.nan
             continue
-        a = sensor[2] + geom[0] + i * geom[1]
-        hx = gx0 + r / res * np.cos(a)
-        hy = gy0 + r / res * np.sin(a)
-        out_r[i] = r
-        out_hx[i] = hx
-        out_hy[i] = hy
+        hx = gx0 + ranges[i] / res * directions[i, 0]
+        hy = gy0 + ranges[i] / res * directions[i, 1]
+        out_hits[i, 0] = hx
+        out_hits[i, 1] = hy
         n_valid += 1
         c, rw = int(np.floor(hx)), int(np.floor(hy))
-        walk += abs(c - int(np.floor(gx0))) + abs(rw - int(np.floor(gy0))) + 7
+        walk += abs(c - c0) + abs(rw - r0) + 7
         c_lo, c_hi = min(c_lo, c), max(c_hi, c)
         r_lo, r_hi = min(r_lo, rw), max(r_hi, rw)
     return n_valid, walk, (c_hi - c_lo + 3) * (r_hi - r_lo + 3)
 
 
 @njit(cache=True)
-def cast_virtual(ref, sensor, angle_min, step, max_len, out_ex, out_ey, out_ok):
-    """Cast the virtual beams once: beam j at ``angle_min + j * step`` (sensor frame) ends at the
+def cast_virtual(ref, sensor, directions, max_len, out_expected, out_found):
+    """Cast the virtual beams once: beam j from the sensor along ``directions[j]`` ends at the
     first occupied-or-unknown cell of ``ref``, or where it leaves the map (outside is unknown);
-    ``out_ok[j]`` is False when nothing blocks it within ``max_len`` grid units."""
+    ``out_found[j]`` is False when nothing blocks it within ``max_len`` grid units."""
     gx0, gy0 = sensor[0], sensor[1]
-    for j in range(out_ex.shape[0]):
-        a = sensor[2] + angle_min + j * step
-        ca, sa = np.cos(a), np.sin(a)
+    for j in range(directions.shape[0]):
+        ca, sa = directions[j, 0], directions[j, 1]
         t, status = first_hit(ref, gx0, gy0, ca, sa, max_len, True)
-        out_ok[j] = status != NO_HIT
-        out_ex[j] = gx0 + t * ca
-        out_ey[j] = gy0 + t * sa
+        out_found[j] = status != NO_HIT
+        out_expected[j, 0] = gx0 + t * ca
+        out_expected[j, 1] = gy0 + t * sa
 
 
 @njit(cache=True)
-def classify(hx, hy, r, valid, ex, ey, eok, ratio, half_window, wrap, dpar, res, out_change):
+def classify(hits, valid, pairing, expected, found, half_window, wrap, out_change):
     """A valid beam i is a detected change when no expected point in the window of virtual
-    beams ``i * ratio +- half_window`` lies closer than D(r_i) to its hit point. The window is
-    searched nearest index first and wraps around the ends only when ``wrap``. ``dpar`` =
-    (D near [m], range near [m], slope [m/m], D max [m]). Returns the count of changes."""
-    m = ex.shape[0]
+    beams ``i * ratio +- half_window`` (ratio: virtual beams per measured beam) lies closer
+    than ``pairing[i]`` (D(r_i), grid units) to its hit point. The window is searched nearest
+    index first and wraps around the ends only when ``wrap``. Returns the count of changes."""
+    n, m = hits.shape[0], expected.shape[0]
+    ratio = m // n if n else 1
     n_change = 0
-    for i in range(hx.shape[0]):
+    for i in range(n):
         out_change[i] = False
         if not valid[i]:
             continue
-        d = min(dpar[0] + dpar[2] * (r[i] - dpar[1]), dpar[3]) / res
-        d2 = d * d
-        found = False
+        d2 = pairing[i] * pairing[i]
+        found_near = False
         for k in range(2 * half_window + 1):
             j = i * ratio + ((k + 1) // 2 if k % 2 == 1 else -(k // 2))
             if wrap:
                 j = j % m
             elif j < 0 or j >= m:
                 continue
-            if eok[j] and (hx[i] - ex[j]) ** 2 + (hy[i] - ey[j]) ** 2 < d2:
-                found = True
+            dx, dy = hits[i, 0] - expected[j, 0], hits[i, 1] - expected[j, 1]
+            if found[j] and dx * dx + dy * dy < d2:
+                found_near = True
                 break
-        if not found:
+        if not found_near:
             out_change[i] = True
             n_change += 1
     return n_change
@@ -177,6 +204,58 @@ def beam_verdicts(valid, keep, n_skip, wrap, out_verdict):
                     out_verdict[j] = SKIPPED
 
 
+# --- walks along beams ------------------------------------------------------------------------
+@njit(cache=True)
+def walk(ref, sensor, hit, reach, drop_last, cells):
+    """List in ``cells`` (row 0: rows, row 1: cols) the cells of ``ref`` that the segment from
+    the sensor to the point at ``reach`` of the way to ``hit`` passes through, in order,
+    clipped to the map; ``drop_last`` leaves out the cell holding that end point when it lies
+    on the map. Returns the count."""
+    height, width = ref.shape
+    gx0, gy0 = sensor[0], sensor[1]
+    tx = gx0 + reach * (hit[0] - gx0)
+    ty = gy0 + reach * (hit[1] - gy0)
+    n = traverse(gx0, gy0, tx, ty, height, width, cells[0], cells[1])
+    if drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
+        n -= 1
+    return n
+
+
+@njit(cache=True)
+def flag_free_listed(ref, cells, count, marks, out, n):
+    """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are free
+    in ``ref`` and not yet marked, and mark them. Returns the new count. Most cells of a free
+    walk are free, and about half of them new, so the flag goes in without a branch:
+    ``out[n]`` is written for every cell and kept only when the cell is taken (``out`` needs
+    one slot to spare)."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for k in range(count):
+        idx = cells[0, k] * width + cells[1, k]
+        b = idx >> 3
+        bit = np.uint8(1 << (idx & 7))
+        old = marks[b]
+        take = (flat[idx] == FREE) & ((old & bit) == 0)
+        marks[b] = old | (bit if take else np.uint8(0))
+        out[n] = idx
+        n += take
+    return n
+
+
+@njit(cache=True)
+def flag_occupied_listed(ref, cells, count, marks, out, n):
+    """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are
+    occupied or unknown in ``ref`` and not yet marked, and mark them. Returns the new count."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for k in range(count):
+        idx = cells[0, k] * width + cells[1, k]
+        if flat[idx] != FREE and test_and_set(marks, idx):
+            out[n] = idx
+            n += 1
+    return n
+
+
 # --- 2. changed-cells evaluator ---------------------------------------------------------------
 @njit(cache=True)
 def disc_is_free(ref, px, py, rad):
@@ -195,56 +274,39 @@ def disc_is_free(ref, px, py, rad):
 
 
 @njit(cache=True)
-def walk_cells(ref, gx0, gy0, frac, hx, hy, not_free, skip_last, marks, rows, cols, out, n):
-    """Append to ``out`` (from position n) the cells on the segment from the sensor to the
-    point at ``frac`` of the way to the hit that are occupied-or-unknown (``not_free``) or free
-    in ``ref`` and not yet marked; ``skip_last`` leaves out the cell holding that point.
-    Returns the new count."""
-    height, width = ref.shape
-    flat = ref.reshape(-1)
-    tx = gx0 + frac * (hx - gx0)
-    ty = gy0 + frac * (hy - gy0)
-    steps = traverse(gx0, gy0, tx, ty, height, width, rows, cols)
-    if skip_last and 0.0 <= tx < width and 0.0 <= ty < height:
-        steps -= 1
-    for k in range(steps):
-        idx = rows[k] * width + cols[k]
-        if (flat[idx] != FREE) == not_free and test_and_set(marks, idx):
+def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out):
+    """Removed obstacles: the occupied-or-unknown cells from the sensor to p_th of each CHANGE
+    beam i, all but the last, where p_th lies ``reach[i]`` of the way to the hit (none when
+    ``reach[i]`` <= 0: the skip reaches back to the sensor); each cell once (``marks``: cells
+    marked already, as seen surfaces are, get no flag). Returns the count."""
+    n = 0
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE or not reach[i] > 0.0:
+            continue
+        count = walk(ref, sensor, hits[i], reach[i], True, cells)
+        n = flag_occupied_listed(ref, cells, count, marks, out, n)
+    return n
+
+
+@njit(cache=True)
+def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
+    """New obstacles: the hit cell of each CHANGE beam i, if every cell of ``ref`` within
+    ``tol[i]`` (tol(r_i), grid units) of the hit is free, appended to ``out`` from position n;
+    each cell once (``marks``). Returns the new count."""
+    width = ref.shape[1]
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE or not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
+            continue
+        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
+        if test_and_set(marks, idx):
             out[n] = idx
             n += 1
     return n
 
 
+# --- seen-surface guard (not in the paper) ----------------------------------------------------
 @njit(cache=True)
-def flag_changed(ref, hx, hy, r, verdict, sensor, tpar, res, marks, rows, cols, out):
-    """Changed flags of the detected-change beams, each cell at most once (``marks``).
-    New obstacle: the hit cell, if every cell within tol(r) of the hit is free in ``ref``.
-    Removed obstacle: the occupied-or-unknown cells from the sensor to p_th, short of the hit by
-    max(fraction * r, minimum), all but the last. ``tpar`` = (tol near [m], tol far [m],
-    far range [m], skip fraction, skip minimum [m]). Returns (cells flagged, new-obstacle
-    flags)."""
-    width = ref.shape[1]
-    n = 0
-    n_new = 0
-    for i in range(hx.shape[0]):
-        if verdict[i] != CHANGE:
-            continue
-        tol = tpar[0] + (tpar[1] - tpar[0]) * min(r[i] / tpar[2], 1.0)
-        if disc_is_free(ref, hx[i], hy[i], tol / res):
-            idx = int(np.floor(hy[i])) * width + int(np.floor(hx[i]))
-            if test_and_set(marks, idx):
-                out[n] = idx
-                n += 1
-                n_new += 1
-        skip = max(tpar[3] * r[i], tpar[4])
-        if skip < r[i]:
-            n = walk_cells(ref, sensor[0], sensor[1], 1.0 - skip / r[i], hx[i], hy[i], True,
-                           True, marks, rows, cols, out, n)
-    return n, n_new
-
-
-@njit(cache=True)
-def protect_seen(ref, enclosed, hx, hy, verdict, radius, marks, out):
+def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, marks, out):
     """Mark (in ``marks``, so the removed-obstacle walk passes them by) the cells of ``ref``
     that come within ``radius`` (grid units) of the hit point of any valid beam and are
     occupied, or unknown outside the ``enclosed`` regions, and list them in ``out``. Enclosed
@@ -254,21 +316,21 @@ def protect_seen(ref, enclosed, hx, hy, verdict, radius, marks, out):
     height, width = ref.shape
     n = 0
     r2 = radius * radius
-    for i in range(hx.shape[0]):
+    for i in range(hits.shape[0]):
         if verdict[i] == INVALID:
             continue
-        x, y = hx[i], hy[i]
+        x, y = hits[i, 0], hits[i, 1]
         for row in range(max(int(np.floor(y - radius)), 0),
                          min(int(np.floor(y + radius)) + 1, height)):
             dy = max(row - y, 0.0, y - row - 1.0)
             for col in range(max(int(np.floor(x - radius)), 0),
                              min(int(np.floor(x + radius)) + 1, width)):
-                dx = max(col - x, 0.0, x - col - 1.0)
-                if dx * dx + dy * dy > r2:
-                    continue
                 v = ref[row, col]
+                if v == FREE:
+                    continue
+                dx = max(col - x, 0.0, x - col - 1.0)
                 idx = row * width + col
-                if v == FREE or (v != OCC and bit_get(enclosed, idx)):
+                if dx * dx + dy * dy > r2 or (v != OCC and bit_get(enclosed, idx)):
                     continue
                 if test_and_set(marks, idx):
                     out[n] = idx
@@ -276,25 +338,19 @@ def protect_seen(ref, enclosed, hx, hy, verdict, radius, marks, out):
     return n
 
 
+# --- fill_gaps (not in the paper) -------------------------------------------------------------
 @njit(cache=True)
-def clear_marks(marks, cells, n):
-    for k in range(n):
-        marks[cells[k] >> 3] = 0
-
-
-@njit(cache=True)
-def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
+def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
     """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
     whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has
-    nothing that near). Returns (new count, cells flagged here)."""
+    nothing that near); each cell once (``marks``). Returns the new count."""
     height, width = ref.shape
-    n0 = n
     k = clearance
-    for i in range(hx.shape[0]):
+    for i in range(hits.shape[0]):
         if verdict[i] != UNCHANGED:
             continue
-        row0 = int(np.floor(hy[i]))
-        col0 = int(np.floor(hx[i]))
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
         if row0 < k or row0 >= height - k or col0 < k or col0 >= width - k:
             continue
         free = True
@@ -308,49 +364,53 @@ def flag_gaps(ref, hx, hy, verdict, clearance, marks, out, n):
         if free and test_and_set(marks, row0 * width + col0):
             out[n] = row0 * width + col0
             n += 1
-    return n, n - n0
+    return n
 
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
 @njit(cache=True)
-def flag_unchanged(ref, hx, hy, r, verdict, sensor, free_fraction, free_margin, marks, rows,
-                   cols, out):
-    """Unchanged flags of the UNCHANGED beams, each cell at most once (``marks``).
-    Occupied: every occupied-or-unknown cell among the hit cell and its 4-neighbours.
-    Free: every free cell on the beam up to ``free_fraction`` of its range ``r`` or, when
-    ``free_margin`` > 0, up to ``free_margin`` (same unit as ``r``) short of the hit if that
-    reaches further. Returns the count."""
-    height, width = ref.shape
+def flag_free_unchanged(ref, sensor, hits, reach, verdict, marks, cells, out):
+    """Free: the free cells of ``ref`` from the sensor to ``reach[i]`` of the way to the hit of
+    each UNCHANGED beam i; each cell once (``marks``). Returns the count."""
     n = 0
-    for i in range(hx.shape[0]):
+    for i in range(hits.shape[0]):
         if verdict[i] != UNCHANGED:
             continue
-        row0 = int(np.floor(hy[i]))
-        col0 = int(np.floor(hx[i]))
+        count = walk(ref, sensor, hits[i], reach[i], False, cells)
+        n = flag_free_listed(ref, cells, count, marks, out, n)
+    return n
+
+
+@njit(cache=True)
+def flag_occupied_unchanged(ref, hits, verdict, marks, out, n):
+    """Occupied: every occupied-or-unknown cell of ``ref`` among the hit cell of each
+    UNCHANGED beam and its 4-neighbours, appended to ``out`` from position n; each cell once
+    (``marks``). Returns the new count."""
+    height, width = ref.shape
+    for i in range(hits.shape[0]):
+        if verdict[i] != UNCHANGED:
+            continue
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
         for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
             row, col = row0 + dr, col0 + dc
             if 0 <= row < height and 0 <= col < width and ref[row, col] != FREE:
                 if test_and_set(marks, row * width + col):
                     out[n] = row * width + col
                     n += 1
-        frac = free_fraction
-        if 0 < free_margin < r[i]:
-            frac = max(frac, 1.0 - free_margin / r[i])
-        n = walk_cells(ref, sensor[0], sensor[1], frac, hx[i], hy[i], False, False, marks,
-                       rows, cols, out, n)
     return n
 
 
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
-def push_flags(hist, changed, n_changed, unchanged, n_unchanged, mask, threshold, ch_marks,
-               un_marks, out_moved):
+def push_flags(hist, changed, unchanged, mask, threshold, ch_marks, un_marks, out_moved):
     """Shift the scan's flags into the buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & mask``, and clear the scan's marks. ``out_moved`` gets each
     cell whose count n_c changed, as ``idx``, or as ``-1 - idx`` when n_c crossed the
     threshold (its neighbours' support changed too). Returns the count written."""
     n = 0
-    for k in range(n_changed + n_unchanged):
+    n_changed = changed.shape[0]
+    for k in range(n_changed + unchanged.shape[0]):
         if k < n_changed:
             idx, flag = changed[k], 1
             ch_marks[idx >> 3] = 0
@@ -395,13 +455,13 @@ def decide_cell(hist, ref, decided, idx, width, mask, threshold, support):
 
 
 @njit(cache=True)
-def decide(hist, ref, decided, moved, n_moved, width, mask, threshold, support):
+def decide(hist, ref, decided, moved, width, mask, threshold, support):
     """Re-decide every cell whose own count moved, and the 8-neighbours of those whose count
     crossed the threshold: no other cell's inputs changed. Returns the change of the number of
     changed cells."""
     height = ref.shape[0] // width
     delta = 0
-    for k in range(n_moved):
+    for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
         delta += decide_cell(hist, ref, decided, idx, width, mask, threshold, support)
         if moved[k] >= 0 or not support:
@@ -454,14 +514,14 @@ def apply_changes(ref, decided, enclosed, width, close, out):
 
 # --- enclosed unknown regions of the reference map (once per map) -----------------------------
 @njit(cache=True)
-def unknown_runs(ref, out_row, out_c0, out_c1):
-    """Runs of unknown cells, row by row (c1 inclusive). Writes as many as fit and returns
-    how many there are (call with empty arrays to count)."""
+def unknown_runs(ref, out_runs):
+    """Runs of unknown cells, row by row, as rows (row, first col, last col) of ``out_runs``.
+    Writes as many as fit and returns how many there are (call with an empty array to
+    count)."""
     n = 0
-    cap = out_row.shape[0]
-    for row in range(ref.shape[0]):
+    height, width = ref.shape
+    for row in range(height):
         col = 0
-        width = ref.shape[1]
         while col < width:
             if ref[row, col] >= 0:
                 col += 1
@@ -469,32 +529,32 @@ def unknown_runs(ref, out_row, out_c0, out_c1):
             c0 = col
             while col < width and ref[row, col] < 0:
                 col += 1
-            if n < cap:
-                out_row[n], out_c0[n], out_c1[n] = row, c0, col - 1
+            if n < out_runs.shape[0]:
+                out_runs[n, 0], out_runs[n, 1], out_runs[n, 2] = row, c0, col - 1
             n += 1
     return n
 
 
 @njit(cache=True)
-def link_runs(row, c0, c1, parent):
+def link_runs(runs, parent):
     """Union-find over runs: runs in adjacent rows that touch, corners included (8-connected
     unknown regions), share a root. Runs are in row order, sorted by column within a row."""
-    n = row.shape[0]
+    n = runs.shape[0]
     for k in range(n):
         parent[k] = k
     prev0, prev1 = 0, 0        # runs of the previous row: [prev0, prev1)
     k = 0
     while k < n:
         cur0 = k
-        while k < n and row[k] == row[cur0]:
+        while k < n and runs[k, 0] == runs[cur0, 0]:
             k += 1
         i, j = prev0, cur0
-        if prev1 > prev0 and row[prev0] == row[cur0] - 1:
+        if prev1 > prev0 and runs[prev0, 0] == runs[cur0, 0] - 1:
             while i < prev1 and j < k:
-                if c0[i] <= c1[j] + 1 and c0[j] <= c1[i] + 1:
+                if runs[i, 1] <= runs[j, 2] + 1 and runs[j, 1] <= runs[i, 2] + 1:
                     a, b = find_root(parent, i), find_root(parent, j)
                     parent[max(a, b)] = min(a, b)
-                if c1[i] < c1[j]:
+                if runs[i, 2] < runs[j, 2]:
                     i += 1
                 else:
                     j += 1
@@ -502,23 +562,24 @@ def link_runs(row, c0, c1, parent):
 
 
 @njit(cache=True)
-def mark_enclosed(row, c0, c1, parent, height, width, max_cells, bits):
+def mark_enclosed(runs, parent, height, width, max_cells, bits):
     """Set the bits of the cells of every unknown region that touches no map border and has at
     most ``max_cells`` cells. Returns the count of cells marked."""
-    n = row.shape[0]
+    n = runs.shape[0]
     size = np.zeros(n, np.int64)
     border = np.zeros(n, np.bool_)
     for k in range(n):
         root = find_root(parent, k)
-        size[root] += c1[k] - c0[k] + 1
-        if row[k] == 0 or row[k] == height - 1 or c0[k] == 0 or c1[k] == width - 1:
+        row, c0, c1 = runs[k, 0], runs[k, 1], runs[k, 2]
+        size[root] += c1 - c0 + 1
+        if row == 0 or row == height - 1 or c0 == 0 or c1 == width - 1:
             border[root] = True
     marked = 0
     for k in range(n):
         root = find_root(parent, k)
         if border[root] or size[root] > max_cells:
             continue
-        for col in range(c0[k], c1[k] + 1):
-            test_and_set(bits, row[k] * width + col)
-        marked += c1[k] - c0[k] + 1
+        for col in range(runs[k, 1], runs[k, 2] + 1):
+            test_and_set(bits, runs[k, 0] * width + col)
+        marked += runs[k, 2] - runs[k, 1] + 1
     return marked

@@ -51,19 +51,20 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
-    # Not in the paper: an occupied cell of M (or an unknown one outside the enclosed regions)
-    # within this distance of the hit point of any valid beam of the scan (a surface the scan
-    # sees) gets no removed-obstacle flag from that scan. Under a pose error below a cell the rays that graze an object's corner cross its
-    # outline cells while the beams that hit the object say it is still there (README,
-    # "Choices").
+    # Not in the paper (steps.guard_seen_surfaces): an occupied cell of M (or an unknown one
+    # outside the enclosed regions) within this distance of the hit point of any valid beam of
+    # the scan (a surface the scan sees) gets no removed-obstacle flag from that scan. Under a
+    # pose error below a cell the rays that graze an object's corner cross its outline cells
+    # while the beams that hit the object say it is still there (README, "Choices").
     seen_surface_radius: float = 0.075       # [m]; 0: off
-    # Not in the paper: a hit that pairs with M but lands in a cell with nothing of M within
-    # fill_gaps_clearance also gets a changed flag. The pairing distance D(r) otherwise hides
-    # the gaps of a face that an earlier session mapped only in pieces (README, "fill_gaps").
+    # Not in the paper (steps.fill_gaps): a hit that pairs with M but lands in a cell with
+    # nothing of M within fill_gaps_clearance also gets a changed flag. The pairing distance
+    # D(r) otherwise hides the gaps of a face that an earlier session mapped only in pieces
+    # (README, "fill_gaps").
     fill_gaps: bool = False
     fill_gaps_clearance: float = 0.05        # [m] free square around the hit cell, each way
     fill_gaps_free_margin: float = 0.075     # [m] free flags of agreeing beams this short of
-                                             # the hit, with fill_gaps (see steps)
+                                             # the hit, with fill_gaps
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -107,7 +108,7 @@ class UpdaterConfig:
             raise UpdaterError(f"config key 'threshold' ({self.threshold}) exceeds "
                                f"'buffer_size' ({self.buffer_size}): no cell could ever change")
 
-    # --- the range-dependent distances of ALGORITHM.md, in metres ------------------------------
+    # --- the range-dependent distances of ALGORITHM.md [m], for a range or an array of them ---
     def pairing_distance(self, r):
         """D(r) [m]: a measured point this close to an expected point is explained by the map."""
         return _minimum(self.pairing_distance_near

@@ -26,9 +26,9 @@ the caller's ``pose_check`` refuses (``ScanStatus.REFUSED``; e.g.
 from __future__ import annotations
 
 import enum
+import io
 import json
 import math
-import os
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
+from gridmap.atomic import write_atomically
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
@@ -143,7 +144,7 @@ class MapUpdater:
         pose, e.g. ``sensor_pose`` matched to M, is used instead) or refused (the scan is a
         counted skip that, like a lost scan, does not advance the gate)."""
         self._check_input(scan, sensor_pose, odometry)
-        cfg = self.config
+        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
         self._counts["scans"] += 1
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
@@ -152,8 +153,39 @@ class MapUpdater:
             if reason:
                 self._counts["gated"] += 1
                 return ScanReport(t, ScanStatus.GATED, reason, changed_cells=self._n_changed)
+        sensor, status, reason = self._sensor_for_scan(sensor_pose, pose_check)
+        if status is not None:
+            self._counts["skipped"] += 1
+            return ScanReport(t, status, reason, changed_cells=self._n_changed)
+
+        beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws)
+        self._counts["processed"] += 1
+        report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
+                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
+        if steps.is_lost(beams, cfg):
+            self._counts["lost"] += 1
+            return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
+        # the seen-surface guard and fill_gaps are not in the paper
+        guarded = steps.guard_seen_surfaces(ref, beams, cfg, res, self._ch_marks,
+                                            self._enclosed, ws)
+        n_ch, n_new = steps.flag_changed_cells(ref, beams, self._ch_marks, ws)
+        steps.release_seen_surfaces(self._ch_marks, guarded, ws)
+        n_ch, n_gaps = steps.fill_gaps(ref, beams, cfg, res, self._ch_marks, ws, n_ch)
+        n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        hist = self._hist.reshape(-1)
+        n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks, ws)
+        self._n_changed += steps.decide(hist, ref.reshape(-1), self._decided, n_moved,
+                                        ref.shape[1], cfg, ws)
+        if cfg.gating:
+            self._gate.mark_processed(t, gate_pose)
+        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
+                          new_obstacle_flags=n_new + n_gaps, unchanged_flags=n_un,
+                          changed_cells=self._n_changed, **report)
+
+    def _sensor_for_scan(self, sensor_pose: Pose2D, pose_check):
+        """(sensor (gx, gy, yaw), None, "") for a scan to process: the given pose, or the one the
+        pose check refined it to; (None, status, reason) for one to skip."""
         sensor = steps.to_grid(sensor_pose, self._origin, self._res)
-        width = self._ref.shape[1]
         verdict = PoseVerdict.accepted()
         if pose_check is not None and self._on_map(sensor):
             verdict = pose_check()
@@ -166,33 +198,10 @@ class MapUpdater:
                                        f"{verdict.sensor_pose}")
                 sensor = steps.to_grid(verdict.sensor_pose, self._origin, self._res)
         if not self._on_map(sensor):
-            self._counts["skipped"] += 1
-            return ScanReport(t, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP,
-                              changed_cells=self._n_changed)
+            return None, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
         if verdict.is_refused:
-            self._counts["skipped"] += 1
-            return ScanReport(t, ScanStatus.REFUSED, verdict.reason,
-                              changed_cells=self._n_changed)
-
-        beams = steps.classify_beams(self._ref, scan, sensor, self._res, cfg, self._ws)
-        self._counts["processed"] += 1
-        report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
-                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
-        if steps.is_lost(beams, cfg):
-            self._counts["lost"] += 1
-            return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
-        n_ch, n_new = steps.flag_changed_cells(self._ref, beams, sensor, self._res, cfg,
-                                               self._ch_marks, self._enclosed, self._ws)
-        n_un = steps.flag_unchanged_cells(self._ref, beams, sensor, cfg, self._un_marks,
-                                          self._ws)
-        hist, ref = self._hist.reshape(-1), self._ref.reshape(-1)
-        n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks,
-                                   self._ws)
-        self._n_changed += steps.decide(hist, ref, self._decided, n_moved, width, cfg, self._ws)
-        if cfg.gating:
-            self._gate.mark_processed(t, gate_pose)
-        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch, new_obstacle_flags=n_new,
-                          unchanged_flags=n_un, changed_cells=self._n_changed, **report)
+            return None, ScanStatus.REFUSED, verdict.reason
+        return sensor, None, ""
 
     def _on_map(self, sensor: np.ndarray) -> bool:
         height, width = self._ref.shape
@@ -261,22 +270,16 @@ class MapUpdater:
         """Write the whole state to ``path`` (npz): written to a temporary file beside it and
         renamed, so a crash never leaves a half-written state."""
         path = Path(path)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
                 "gate": self._gate.state(), "counts": self._counts}
+        buf = io.BytesIO()
+        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
+                            hist=self._hist)
         try:
-            with open(tmp, "wb") as f:
-                np.savez_compressed(f, meta=np.array(json.dumps(meta)), reference=self._ref,
-                                    hist=self._hist)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException as e:      # interrupted too: never leave the temporary file
-            tmp.unlink(missing_ok=True)
-            if isinstance(e, OSError):
-                raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
-            raise
+            write_atomically(path, buf.getvalue())
+        except OSError as e:
+            raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
 
     @classmethod
     def load(cls, path) -> MapUpdater:

@@ -1,15 +1,20 @@
 """The steps of ALGORITHM.md, one function each, in the order a scan goes through them:
-``classify_beams`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` -> ``push_flags`` ->
-``decide``; ``close_outlines`` builds the output map on demand, ``enclosed_unknown`` prepares the
-last check once per reference map.
+``classify_beams`` -> ``is_lost`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` ->
+``push_flags`` -> ``decide``. The two rules that are not in the paper are steps of their own:
+``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the changed-cells
+evaluator, and ``fill_gaps`` after it. ``close_outlines`` builds the output map on demand,
+``enclosed_unknown`` prepares the last check once per reference map.
 
-Each function checks what it is given, converts metres to grid units and calls one kernel of
-``updater._kernels`` for the whole scan. Points are in grid units, (gx, gy) = ((x - ox) / res,
-(y - oy) / res); cells are addressed by flat index ``row * width + col``.
+Each function computes the per-beam quantities it needs with NumPy, in grid units, from the
+configuration's own methods (``UpdaterConfig.pairing_distance`` and the like), and calls the
+kernels of ``updater._kernels`` once each for the whole scan. Points are in grid units,
+(gx, gy) = ((x - ox) / res, (y - oy) / res); cells are addressed by flat index
+``row * width + col``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -20,25 +25,34 @@ from gridmap import Scan
 from .config import UpdaterConfig
 
 
+@functools.cache
 def kernels():
-    from . import _kernels  # numba is imported lazily, on first use
+    """The kernels module: numba is imported on first use, not with the package. Cached, as
+    an import statement costs about as much as a small kernel's call."""
+    from . import _kernels
 
     return _kernels
 
 
 @dataclass
 class Beams:
-    """The classifier's result for one scan (views into the workspace, valid until the next
-    scan). ``verdict`` holds one of INVALID, UNCHANGED, SKIPPED, CHANGE per beam."""
+    """The classifier's result for one scan and the per-beam quantities the evaluators use
+    (some are views into the workspace: valid until the next scan). ``verdict`` holds one of
+    INVALID, UNCHANGED, SKIPPED, CHANGE per beam; the float arrays are NaN for invalid
+    beams."""
 
-    ranges: np.ndarray     # [m], float64
-    hx: np.ndarray         # hit points [grid units]
-    hy: np.ndarray
-    verdict: np.ndarray    # int8
-    valid: int             # valid beams
-    raw_changes: int       # detected changes before the run filter
-    changes: int           # detected changes kept by the run filter
-    flag_capacity: int     # no evaluator can flag more cells than this in this scan
+    sensor: np.ndarray      # (gx, gy, yaw) [grid units, rad]
+    ranges: np.ndarray      # [m], float64
+    hits: np.ndarray        # (N, 2) hit points [grid units]
+    pairing: np.ndarray     # D(r_i) [grid units]
+    tol: np.ndarray         # tol(r_i) [grid units]
+    skip: np.ndarray        # |p_i - p_th| [m]: what the removed-obstacle walk leaves out
+    free_reach: np.ndarray  # the free walk ends at this fraction of the way to the hit
+    verdict: np.ndarray     # int8
+    valid: int              # valid beams
+    raw_changes: int        # detected changes before the run filter
+    changes: int            # detected changes kept by the run filter
+    flag_capacity: int      # no evaluator can flag more cells than this in this scan
 
 
 class Workspace:
@@ -57,21 +71,18 @@ class Workspace:
         if n != self._beams:
             self._beams = n
             self.r = np.zeros(n, np.float64)
-            self.hx = np.zeros(n, np.float64)
-            self.hy = np.zeros(n, np.float64)
+            self.hits = np.zeros((n, 2), np.float64)
             self.valid = np.zeros(n, np.bool_)
             self.change = np.zeros(n, np.bool_)
             self.keep = np.zeros(n, np.bool_)
             self.verdict = np.zeros(n, np.int8)
         if m != self._virtual:
             self._virtual = m
-            self.ex = np.zeros(m, np.float64)
-            self.ey = np.zeros(m, np.float64)
-            self.eok = np.zeros(m, np.bool_)
+            self.expected = np.zeros((m, 2), np.float64)
+            self.found = np.zeros(m, np.bool_)
         if walk > self._walk:
             self._walk = walk
-            self.rows = np.zeros(walk, np.int64)
-            self.cols = np.zeros(walk, np.int64)
+            self.cells = np.zeros((2, walk), np.int64)    # rows, cols of one walk
 
     def for_flags(self, capacity: int) -> None:
         if capacity > self._flags:
@@ -101,33 +112,66 @@ def to_grid(sensor_pose, origin, res) -> np.ndarray:
 
 
 # --- 1. beam classifier -----------------------------------------------------------------------
+def valid_ranges(scan: Scan, r_hi: float, ws: Workspace) -> np.ndarray:
+    """The ranges [m] as float64 in ``ws.r``, NaN for invalid beams, and ``ws.valid``. A beam is
+    invalid when its range is not finite, not above 0 (r = 0 is no hit), below the scan's
+    range_min, or at or beyond ``r_hi`` = min(max_range, the scan's range_max)."""
+    kernels().valid_ranges(scan.ranges, float(scan.range_min), float(r_hi), ws.r, ws.valid)
+    return ws.r
+
+
+def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
+    """The range-dependent distances of ALGORITHM.md for every beam, from the config: D(r_i)
+    and tol(r_i) [grid units], and the removed-obstacle skip [m]."""
+    return (cfg.pairing_distance(ranges) / res, cfg.new_obstacle_radius(ranges) / res,
+            cfg.removed_skip(ranges))
+
+
+def hit_points(scan: Scan, sensor: np.ndarray, res: float, ratio: int,
+               ws: Workspace) -> tuple[np.ndarray, int, int]:
+    """Hit points of the valid beams into ``ws.hits`` (``ws.r``, ``ws.valid`` ready), and the
+    directions of the virtual beams, ``ratio`` per measured angular step. Returns (virtual
+    directions (M, 2), valid beams, a bound on the cells any evaluator can flag)."""
+    k = kernels()
+    n = scan.beams
+    step = scan.angle_increment / ratio
+    virtual = np.empty((n * ratio, 2))
+    k.beam_directions(sensor[2], scan.angle_min, step, virtual)
+    measured = virtual      # one virtual beam per step: the very same angles
+    if ratio != 1:
+        measured = np.empty((n, 2))
+        k.beam_directions(sensor[2], float(scan.angle_min), float(scan.angle_increment),
+                          measured)
+    n_valid, walk, box = k.beam_endpoints(ws.r, ws.valid, sensor, measured, res, ws.hits)
+    return virtual, n_valid, min(walk, box)
+
+
 def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
                    cfg: UpdaterConfig, ws: Workspace) -> Beams:
-    """Valid beams, hit points, virtual beams cast once each, the windowed comparison with D(r),
-    the run filter and the N_skip neighbourhood of the changes. The window and the run filter
-    wrap around the scan's ends only when the scan covers 360 degrees."""
+    """Valid beams, hit points, the per-beam distances, virtual beams cast once each, the
+    windowed comparison with D(r), the run filter and the N_skip neighbourhood of the changes.
+    The window and the run filter wrap around the scan's ends only when the scan covers 360
+    degrees."""
     k = kernels()
     n = scan.beams
     ratio = cfg.virtual_to_measured_ratio
     r_hi = min(cfg.max_range, scan.range_max)
     max_len = (r_hi + cfg.cast_margin) / res
     ws.for_beams(n, n * ratio, 2 * int(math.ceil(max_len)) + 8)
-    geom = np.array([scan.angle_min, scan.angle_increment, scan.range_min, r_hi])
-    n_valid, walk, box = k.beam_endpoints(scan.ranges, sensor, geom, res, ws.r, ws.hx, ws.hy,
-                                          ws.valid)
+    ranges = valid_ranges(scan, r_hi, ws)
+    virtual, n_valid, bound = hit_points(scan, sensor, res, ratio, ws)
+    k.cast_virtual(ref, sensor, virtual, max_len, ws.expected, ws.found)
     step = scan.angle_increment / ratio
-    k.cast_virtual(ref, sensor, scan.angle_min, step, max_len, ws.ex, ws.ey, ws.eok)
     half = int(math.floor(math.radians(cfg.window_deg) / abs(step) + 1e-9)) if n else 0
     wrap = scan.covers_full_circle()
-    dpar = np.array([cfg.pairing_distance_near, cfg.pairing_range_near,
-                     cfg.pairing_distance_slope, cfg.pairing_distance_max])
-    raw = k.classify(ws.hx, ws.hy, ws.r, ws.valid, ws.ex, ws.ey, ws.eok, ratio, half, wrap,
-                     dpar, res, ws.change)
+    pairing, tol, skip = beam_distances(ranges, res, cfg)
+    raw = k.classify(ws.hits, ws.valid, pairing, ws.expected, ws.found, half, wrap, ws.change)
     kept = k.run_filter(ws.change, cfg.min_run, wrap, ws.keep)
     k.beam_verdicts(ws.valid, ws.keep, cfg.n_skip, wrap, ws.verdict)
-    capacity = min(walk, box, ref.size)
+    capacity = min(bound, ref.size)
     ws.for_flags(capacity)
-    return Beams(ws.r, ws.hx, ws.hy, ws.verdict, n_valid, raw, kept, capacity)
+    return Beams(sensor, ranges, ws.hits, pairing, tol, skip, np.full(n, cfg.free_fraction),
+                 ws.verdict, n_valid, raw, kept, capacity)
 
 
 def is_lost(beams: Beams, cfg: UpdaterConfig) -> bool:
@@ -136,42 +180,76 @@ def is_lost(beams: Beams, cfg: UpdaterConfig) -> bool:
     return beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid
 
 
-# --- 2. changed-cells evaluator ---------------------------------------------------------------
-def flag_changed_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray, res: float,
-                       cfg: UpdaterConfig, marks: np.ndarray, enclosed: np.ndarray,
-                       ws: Workspace) -> tuple[int, int]:
-    """Changed flags of the detected-change beams into ``ws.changed`` (each cell once):
-    new obstacles (hit cell, if M is free within tol(r)) and removed obstacles (occupied or
-    unknown cells up to p_th, all but the last; none within ``seen_surface_radius`` of any hit
-    of the scan, unless an unknown cell of the ``enclosed`` regions). With ``cfg.fill_gaps``
-    also the hit cells of agreeing beams with nothing of M within ``fill_gaps_clearance``
-    (counted as new-obstacle flags). Returns (cells flagged, new-obstacle flags)."""
-    tpar = np.array([cfg.radius_near, cfg.radius_far, cfg.radius_far_range,
-                     cfg.removed_skip_fraction, cfg.removed_skip_min])
-    n_protected = 0
+# --- not in the paper: the seen-surface guard -------------------------------------------------
+def guard_seen_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+                        marks: np.ndarray, enclosed: np.ndarray, ws: Workspace) -> int:
+    """Mark in ``marks`` (the changed-flag marks, so the removed-obstacle walk passes them by)
+    the cells of M within ``seen_surface_radius`` of the hit point of any valid beam that are
+    occupied, or unknown outside the ``enclosed`` regions: surfaces this scan sees. Under a
+    pose error below a cell the rays that graze an object's corner cross its outline cells
+    while the beams that hit the object say it is still there (README, "Choices"). Only scans
+    with detected changes need it. Returns the count marked, for ``release_seen_surfaces``."""
     radius = cfg.seen_surface_radius / res
-    if radius > 0 and beams.changes:
-        side = 2 * int(math.ceil(radius)) + 1
-        ws.for_protected(min(beams.hx.shape[0] * side * side, ref.size))
-        n_protected = kernels().protect_seen(ref, enclosed, beams.hx, beams.hy, beams.verdict,
-                                             radius, marks, ws.protected)
-    n, n_new = kernels().flag_changed(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
-                                      sensor, tpar, res, marks, ws.rows, ws.cols, ws.changed)
-    if cfg.fill_gaps:
-        clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
-        n, n_gap = kernels().flag_gaps(ref, beams.hx, beams.hy, beams.verdict, clearance,
-                                       marks, ws.changed, n)
-        n_new += n_gap
-    if n_protected:
-        kernels().clear_marks(marks, ws.protected, n_protected)
-    return n, n_new
+    if radius <= 0 or not beams.changes:
+        return 0
+    side = 2 * int(math.ceil(radius)) + 1
+    ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size))
+    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict, radius,
+                                        marks, ws.protected)
+
+
+def release_seen_surfaces(marks: np.ndarray, n_guarded: int, ws: Workspace) -> None:
+    """Clear the marks ``guard_seen_surfaces`` set, and only those."""
+    if n_guarded:
+        kernels().clear_bits(marks, ws.protected, n_guarded)
+
+
+# --- 2. changed-cells evaluator ---------------------------------------------------------------
+def flag_changed_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                       ws: Workspace) -> tuple[int, int]:
+    """Changed flags of the detected-change beams into ``ws.changed``, each cell once
+    (``marks``). New obstacles: the hit cell, if every cell of M within tol(r_i) is free.
+    Removed obstacles: the occupied or unknown cells from the sensor to p_th, short of the hit
+    by the skip, all but the last (cells marked already, as ``guard_seen_surfaces`` marks
+    them, get none). Returns (cells flagged, new-obstacle flags)."""
+    k = kernels()
+    reach = 1.0 - beams.skip / beams.ranges     # p_th as a fraction of the way to the hit
+    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach, beams.verdict, marks,
+                                 ws.cells, ws.changed)
+    n_all = k.flag_new_obstacles(ref, beams.hits, beams.tol, beams.verdict, marks, ws.changed, n)
+    return n_all, n_all - n
+
+
+# --- not in the paper: fill_gaps --------------------------------------------------------------
+def fill_gaps(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+              marks: np.ndarray, ws: Workspace, n: int) -> tuple[int, int]:
+    """With ``cfg.fill_gaps``: a hit that pairs with M but lands in a cell with nothing of M
+    within ``fill_gaps_clearance`` also gets a changed flag, appended to ``ws.changed`` after
+    the first n (each cell once, ``marks``). The pairing distance D(r) otherwise hides the gaps
+    of a face that an earlier session mapped only in pieces (README, "fill_gaps").
+
+    The free walk of an agreeing beam then reaches to ``fill_gaps_free_margin`` short of the
+    hit where that is further than ``free_fraction`` of its range (beyond 3.75 m at the
+    defaults): a free cell two cells in front of a face, which noisy hits sometimes reach, then
+    also gets the unchanged flags of the beams that pass it, so this rule draws it only from
+    hits that land there consistently. Returns (cells flagged in all, flagged here)."""
+    if not cfg.fill_gaps:
+        return n, 0
+    clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
+    n_all = kernels().flag_gaps(ref, beams.hits, beams.verdict, clearance, marks, ws.changed, n)
+    margin = cfg.fill_gaps_free_margin
+    if margin > 0:
+        longer = margin < beams.ranges
+        beams.free_reach[longer] = np.maximum(beams.free_reach[longer],
+                                              1.0 - margin / beams.ranges[longer])
+    return n_all, n_all - n
 
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
-def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray,
-                         cfg: UpdaterConfig, marks: np.ndarray, ws: Workspace) -> int:
+def flag_unchanged_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                         ws: Workspace) -> int:
     """Unchanged flags of the beams the classifier left UNCHANGED into ``ws.unchanged`` (each
-    cell once).
+    cell once, ``marks``).
 
     Occupied cells: the code's variant, every occupied-or-unknown cell among the hit cell c(p_i)
     and its 4-neighbours, rather than the paper's (c(p_i) if occupied, else its occupied
@@ -181,16 +259,12 @@ def flag_unchanged_cells(ref: np.ndarray, beams: Beams, sensor: np.ndarray,
     collects its unchanged flags steadily, which is what protects walls against the stray
     changed flags of grazing beams. Unknown counts as occupied here, as everywhere in detection.
 
-    Free cells: every free cell on the beam up to ``free_fraction`` of its range. With
-    ``cfg.fill_gaps``, up to ``fill_gaps_free_margin`` short of the hit where that reaches
-    further (beyond 3.75 m at the defaults): a free cell two cells in front of a face, which
-    noisy hits sometimes reach, then also gets the unchanged flags of the beams that pass it,
-    so ``fill_gaps`` draws it only from hits that land there consistently. Returns the count
-    of cells flagged."""
-    margin = cfg.fill_gaps_free_margin if cfg.fill_gaps else 0.0
-    return kernels().flag_unchanged(ref, beams.hx, beams.hy, beams.ranges, beams.verdict,
-                                    sensor, cfg.free_fraction, margin, marks, ws.rows, ws.cols,
-                                    ws.unchanged)
+    Free cells: every free cell on the beam up to ``beams.free_reach`` of the way to the hit
+    (``free_fraction``, or further with ``fill_gaps``). Returns the count of cells flagged."""
+    k = kernels()
+    n = k.flag_free_unchanged(ref, beams.sensor, beams.hits, beams.free_reach, beams.verdict,
+                              marks, ws.cells, ws.unchanged)
+    return k.flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks, ws.unchanged, n)
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -204,7 +278,7 @@ def push_flags(hist_flat: np.ndarray, n_changed: int, n_unchanged: int, cfg: Upd
     ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``. Only flagged cells are touched. Returns
     the count of entries written to ``ws.moved`` (cells whose count n_c changed)."""
     ws.for_moved(n_changed + n_unchanged)
-    return kernels().push_flags(hist_flat, ws.changed, n_changed, ws.unchanged, n_unchanged,
+    return kernels().push_flags(hist_flat, ws.changed[:n_changed], ws.unchanged[:n_unchanged],
                                 buffer_mask(cfg), cfg.threshold, ch_marks, un_marks, ws.moved)
 
 
@@ -213,7 +287,7 @@ def decide(hist_flat: np.ndarray, ref_flat: np.ndarray, decided: np.ndarray, n_m
     """The decision rule (n_c >= T, or n_c plus the 8-neighbours of the same state in M with
     n >= T reaches T) for the cells whose inputs changed this scan. Returns the change of the
     number of changed cells."""
-    return kernels().decide(hist_flat, ref_flat, decided, ws.moved, n_moved, width,
+    return kernels().decide(hist_flat, ref_flat, decided, ws.moved[:n_moved], width,
                             buffer_mask(cfg), cfg.threshold, cfg.neighbour_support)
 
 
@@ -245,12 +319,11 @@ def enclosed_unknown(ref: np.ndarray, max_cells: int) -> tuple[np.ndarray, int]:
     cells that touch only at a corner belong to one region, so a region counts as enclosed only
     if it is sealed against diagonal leaks too. Returns (bits, cells marked)."""
     k = kernels()
-    empty = np.zeros(0, np.int32)
-    n = k.unknown_runs(ref, empty, empty, empty)
-    row, c0, c1 = (np.zeros(n, np.int32) for _ in range(3))
-    k.unknown_runs(ref, row, c0, c1)
+    n = k.unknown_runs(ref, np.zeros((0, 3), np.int32))
+    runs = np.zeros((n, 3), np.int32)          # row, first col, last col
+    k.unknown_runs(ref, runs)
     parent = np.zeros(n, np.int32)
-    k.link_runs(row, c0, c1, parent)
+    k.link_runs(runs, parent)
     bits = np.zeros((ref.size + 7) // 8, np.uint8)
-    marked = k.mark_enclosed(row, c0, c1, parent, ref.shape[0], ref.shape[1], max_cells, bits)
+    marked = k.mark_enclosed(runs, parent, ref.shape[0], ref.shape[1], max_cells, bits)
     return bits, int(marked)

@@ -28,11 +28,12 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from gridmap import OccupancyGrid, Pose2D, Scan
+from gridmap.config import check_bounds
 
 from .config import LocalizationError
 from .confidence import PoseCheck, PoseCheckConfig
@@ -51,6 +52,17 @@ class TrackEvent:
     time: float
     state: TrackState
     reason: str
+
+
+# The range of every number (docs/reliability.md).
+TRACKING_BOUNDS = {
+    "min_cluster_share": (0.0, 1.0), "max_position_std": (0.0, 100.0),
+    "max_yaw_std_deg": (0.0, 180.0), "settle_updates": (1, 1000), "max_fit": (0.0, 1.0),
+    "lost_cluster_share": (0.0, 1.0), "lost_position_std": (0.0, 100.0),
+    "lost_yaw_std_deg": (0.0, 180.0), "lost_scans": (1, 1000), "relocalise_after": (0, 100_000),
+    "global_particles_per_m2": (0.0, 1000.0), "min_global_particles": (1, 1_000_000),
+    "max_global_particles": (1, 1_000_000),
+}
 
 
 @dataclass(frozen=True)
@@ -76,13 +88,10 @@ class TrackingConfig:
     max_global_particles: int = 100000
 
     def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) \
-                and v >= 0 and (f.type != "int" or isinstance(v, int))
-            if not ok:
-                raise LocalizationError(f"tracking key '{f.name}' must be a finite number "
-                                        f">= 0, got {v!r}")
+        try:
+            check_bounds(self, TRACKING_BOUNDS, LocalizationError)
+        except LocalizationError as e:
+            raise LocalizationError(str(e).replace("config key", "tracking key")) from None
         if not self.lost_cluster_share <= self.min_cluster_share <= 1:
             raise LocalizationError("tracking keys 'lost_cluster_share' and "
                                     "'min_cluster_share' must satisfy lost <= min <= 1")
@@ -91,12 +100,9 @@ class TrackingConfig:
             raise LocalizationError("tracking keys 'lost_position_std' and "
                                     "'lost_yaw_std_deg' must be at least 'max_position_std' "
                                     "and 'max_yaw_std_deg'")
-        if self.max_fit > 1 or self.settle_updates < 1 or self.lost_scans < 1:
-            raise LocalizationError("tracking keys: 'max_fit' must be <= 1, 'settle_updates' "
-                                    "and 'lost_scans' >= 1")
-        if not 1 <= self.min_global_particles <= self.max_global_particles:
+        if self.min_global_particles > self.max_global_particles:
             raise LocalizationError("tracking keys 'min_global_particles' and "
-                                    "'max_global_particles' must satisfy 1 <= min <= max")
+                                    "'max_global_particles' must satisfy min <= max")
 
 
 class TrackingMonitor:

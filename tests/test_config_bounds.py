@@ -12,7 +12,8 @@ from gridmap import MapUpdatingError
 DOC = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "reliability.md").read_text()
 CONFIGS = [("localization.config", "LocalizerConfig", "BOUNDS"),
            ("localization.confidence", "PoseCheckConfig", "POSE_CHECK_BOUNDS"),
-           ("updater.config", "UpdaterConfig", "BOUNDS")]
+           ("updater.config", "UpdaterConfig", "BOUNDS"),
+           ("localization.tracking", "TrackingConfig", "TRACKING_BOUNDS")]
 
 
 def configs():

@@ -161,7 +161,7 @@ class MapUpdater:
         self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
                       raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
-        if steps.is_lost(beams, cfg):
+        if steps.is_lost(beams, cfg, self._ref):
             self._counts["lost"] += 1
             return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
         # the seen-surface guard and fill_gaps are not in the paper

@@ -80,6 +80,18 @@ class RunFolderLock:
             self._file = None
 
 
+def remove_partial_files(out_dir) -> list[Path]:
+    """Remove the temporary files a killed run left half-written (``gridmap.atomic`` names
+    them ``.<name>.<pid>.<thread>.tmp``; they never got their real name). Returns them."""
+    import re
+
+    pattern = re.compile(r"\..+\.\d+(\.\d+)?\.tmp")
+    gone = [p for p in Path(out_dir).rglob(".*.tmp") if p.is_file() and pattern.fullmatch(p.name)]
+    for p in gone:
+        p.unlink(missing_ok=True)
+    return gone
+
+
 def check_new_run_folder(out_dir) -> None:
     """A new run (not --resume) may go into a missing or empty folder, or one without a run;
     never over another run's outputs, whose files would then describe two runs."""

@@ -186,6 +186,7 @@ def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions
     results: list[SessionResult] = []
     wall_before = 0.0
     if options.resume:
+        checkpoint.remove_partial_files(out_dir)     # what the killed run was writing
         results, wall_before = checkpoint.finished_sessions(out_dir, scn, n)
         checkpoint.restore_session_outputs(out_dir, [r.name for r in results])
     else:

@@ -372,3 +372,68 @@ def test_maps_state_and_metrics_are_flushed_to_disk_before_and_after_the_rename(
     sizes = [(tmp_path / n).stat().st_size for n in ("m.pgm", "m.yaml", "s.npz", "metrics.json")]
     assert synced == [sizes[0], "folder", sizes[1], "folder", sizes[2], "folder", sizes[3],
                       "folder"]
+
+
+@pytest.mark.parametrize("section, key, value, words", [
+    ("updater", "last_check_max_area", 1e300, ("last_check_max_area", "[0, 10000]")),
+    ("updater", "virtual_to_measured_ratio", 1000000, ("virtual_to_measured_ratio", "[1, 16]")),
+    ("updater", "window_deg", 1e9, ("window_deg", "[0, 45]")),
+    ("pose_check", "fine_step_deg", 1e9, ("fine_step_deg", "[0.001, 45]")),
+    ("pose_check", "coarse_steps", 10**6, ("coarse_steps", "[0, 50]")),
+    ("localizer", "max_particles", 10**9, ("max_particles", "[1, 100000]")),
+])
+def test_config_values_that_would_hang_or_crash_are_refused_with_their_range(
+        small_log, tmp_path, section, key, value, words, capsys):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text(yaml.safe_dump({section: {key: value}}))
+    for args in (["run", "--config", cfg, "--out", tmp_path / "run", "--no-progress"],
+                 ["update", "--config", cfg, "--map", small_log / "m.yaml", "--log",
+                  small_log / "run.log", "--out", tmp_path / "o.yaml", "--no-progress"]):
+        refused(args, "cfg.yaml", *words, inputs=tmp_path, capsys=capsys,
+                outputs=[tmp_path / "run", tmp_path / "o.yaml"])
+
+
+def test_a_damaged_state_file_is_refused_wherever_it_is_damaged(tmp_path):
+    from updater import MapUpdater, UpdaterError
+
+    MapUpdater(reference_grid()).save(tmp_path / "s.npz")
+    raw = (tmp_path / "s.npz").read_bytes()
+    kinds = set()
+    for offset in range(0, len(raw) - 64, 16):
+        damaged = bytearray(raw)
+        damaged[offset:offset + 64] = bytes(64)
+        (tmp_path / "d.npz").write_bytes(bytes(damaged))
+        try:
+            MapUpdater.load(tmp_path / "d.npz")
+        except UpdaterError as e:
+            kinds.add(str(e).split(":")[1].strip()[:30])
+            assert "d.npz" in str(e) and "\n" not in str(e)
+    assert kinds                      # and nothing but UpdaterError escaped
+
+
+def test_a_laserscan_of_one_range_and_no_increment_is_skipped_and_counted(tmp_path, capsys):
+    from gridmap import Pose2D, Scan
+    from robotlogs.records import OdomRecord, ScanRecord, TransformRecord
+    from robotlogs.rosbag import LASER_SCAN, BagWriter
+
+    save_map(reference_grid(), tmp_path / "m.yaml")
+    with BagWriter(tmp_path / "r.bag", "ros1") as w:
+        for k in range(6):
+            t = 1.7e9 + k
+            w.write(OdomRecord(t, Pose2D(0.4 + 0.5 * k, 0.3, 0.0)))
+            w.write_transforms([TransformRecord(t, "map", "odom", Pose2D(0.0, 0.0, 0.0))])
+            if k == 3:          # one range, angle_increment 0: a scan no beam can be placed in
+                w._put("/scan", LASER_SCAN, t, w._ts.types[LASER_SCAN](
+                    header=w._header("/scan", t, "base_link"), angle_min=0.0, angle_max=0.0,
+                    angle_increment=0.0, time_increment=0.0, scan_time=0.0, range_min=0.05,
+                    range_max=10.0, ranges=np.array([1.0], np.float32),
+                    intensities=np.zeros(0, np.float32)))
+                continue
+            w.write(ScanRecord(t, Scan(np.full(180, 0.3, np.float32), -1.57, 0.0175, 0.05,
+                                       10.0, t), frame_id="base_link"))
+    with time_limit(LIMIT_S):
+        assert main(["update", "--map", tmp_path / "m.yaml", "--log", tmp_path / "r.bag",
+                     "--out", tmp_path / "o.yaml", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "5 of" in out or "of 5 scans" in out or "skipped" in out, out
+    assert load_map(tmp_path / "o.yaml").shape == reference_grid().shape

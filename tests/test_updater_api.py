@@ -53,7 +53,7 @@ def test_config_refuses_unknown_keys_with_a_suggestion(tmp_path):
         UpdaterConfig.from_dict({"threshold": 11})
     with pytest.raises(UpdaterError, match="'gating' must be true or false"):
         UpdaterConfig.from_dict({"gating": "yes"})
-    with pytest.raises(UpdaterError, match="'window_deg' must be a number >= 0"):
+    with pytest.raises(UpdaterError, match=r"'window_deg' must be a number in \[0, 45\]"):
         UpdaterConfig(window_deg=float("nan"))
     path = tmp_path / "u.yaml"
     path.write_text("updater:\n  gating: false\n  threshold: 6\n  max_range: 12\n")

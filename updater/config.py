@@ -6,10 +6,9 @@ Every parameter of the method lives here, with its unit in brackets. Loading (``
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
-from gridmap.config import config_from_dict, config_from_yaml
+from gridmap.config import check_bounds, config_from_dict, config_from_yaml
 from gridmap.errors import MapUpdatingError
 
 
@@ -20,6 +19,27 @@ class UpdaterError(MapUpdatingError, ValueError):
 
 # Bits 0..N_b-1 of a buffer hold the flags; the rest of the uint16 stays unused.
 MAX_BUFFER_SIZE = 16
+
+
+# The range of every number (README, "Reliability"): wide enough for any lidar and map, narrow
+# enough that a slip of a digit (a window of 1e9 degrees, 1e6 virtual beams per beam, a 1e300
+# m^2 region) is refused rather than run for hours or failing inside a kernel.
+BOUNDS = {
+    "gate_min_interval": (0.0, 3600.0), "gate_min_distance": (0.0, 100.0),
+    "gate_min_rotation_deg": (0.0, 360.0), "gate_fast_turn_deg_s": (1e-3, 3600.0),
+    "gate_recovery_time": (0.0, 3600.0), "gate_recovery_distance": (0.0, 1000.0),
+    "gate_velocity_window": (0.0, 60.0), "max_range": (1e-3, 100.0), "cast_margin": (0.0, 5.0),
+    "virtual_to_measured_ratio": (1, 16), "window_deg": (0.0, 45.0),
+    "pairing_distance_near": (1e-3, 5.0), "pairing_range_near": (0.0, 100.0),
+    "pairing_distance_slope": (0.0, 1.0), "pairing_distance_max": (1e-3, 5.0),
+    "min_run": (1, 100), "lost_fraction": (1e-3, 1.0), "radius_near": (0.0, 5.0),
+    "radius_far": (0.0, 5.0), "radius_far_range": (1e-3, 100.0),
+    "removed_skip_fraction": (0.0, 0.99), "removed_skip_min": (0.0, 5.0),
+    "seen_surface_radius": (0.0, 1.0), "fill_gaps_clearance": (0.0, 1.0),
+    "fill_gaps_free_margin": (0.0, 5.0), "n_skip": (0, 100), "free_fraction": (1e-3, 1.0),
+    "buffer_size": (1, MAX_BUFFER_SIZE), "threshold": (1, MAX_BUFFER_SIZE),
+    "last_check_max_area": (0.0, 10_000.0),
+}
 
 
 @dataclass(frozen=True)
@@ -81,29 +101,7 @@ class UpdaterConfig:
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")
-        for name in ("gate_min_interval", "gate_min_distance", "gate_min_rotation_deg",
-                     "gate_recovery_time", "gate_recovery_distance", "gate_velocity_window",
-                     "window_deg", "pairing_distance_slope", "radius_near", "radius_far",
-                     "removed_skip_fraction", "removed_skip_min", "last_check_max_area",
-                     "cast_margin", "pairing_range_near", "fill_gaps_clearance",
-                     "fill_gaps_free_margin",
-                     "seen_surface_radius"):
-            _check_number(name, getattr(self, name), lambda v: v >= 0, "a number >= 0")
-        for name in ("gate_fast_turn_deg_s", "max_range", "pairing_distance_near",
-                     "pairing_distance_max", "radius_far_range"):
-            _check_number(name, getattr(self, name), lambda v: v > 0, "a number > 0")
-        for name in ("lost_fraction", "free_fraction"):
-            _check_number(name, getattr(self, name), lambda v: 0 < v <= 1, "a number in (0, 1]")
-        if self.removed_skip_fraction >= 1:
-            raise UpdaterError("config key 'removed_skip_fraction' must be < 1")
-        for name, low in (("virtual_to_measured_ratio", 1), ("min_run", 1), ("n_skip", 0),
-                          ("buffer_size", 1), ("threshold", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < low:
-                raise UpdaterError(f"config key '{name}' must be an integer >= {low}, got {v!r}")
-        if self.buffer_size > MAX_BUFFER_SIZE:
-            raise UpdaterError(f"config key 'buffer_size' must be <= {MAX_BUFFER_SIZE} "
-                               f"(the buffers are uint16), got {self.buffer_size}")
+        check_bounds(self, BOUNDS, UpdaterError)
         if self.threshold > self.buffer_size:
             raise UpdaterError(f"config key 'threshold' ({self.threshold}) exceeds "
                                f"'buffer_size' ({self.buffer_size}): no cell could ever change")
@@ -137,11 +135,6 @@ class UpdaterConfig:
     def from_yaml(cls, path) -> UpdaterConfig:
         """Load from a YAML file holding the keys at the top level (or under ``updater:``)."""
         return config_from_yaml(cls, path, UpdaterError, "updater")
-
-
-def _check_number(name, v, ok, what):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
-        raise UpdaterError(f"config key '{name}' must be {what}, got {v!r}")
 
 
 def _minimum(a, b):

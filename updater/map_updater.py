@@ -29,7 +29,6 @@ import enum
 import io
 import json
 import math
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -162,7 +161,7 @@ class MapUpdater:
         self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
                       raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
-        if steps.is_lost(beams, cfg):
+        if steps.is_lost(beams, cfg, self._ref):
             self._counts["lost"] += 1
             return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
         # the seen-surface guard and fill_gaps are not in the paper
@@ -285,13 +284,21 @@ class MapUpdater:
     def load(cls, path) -> MapUpdater:
         """An updater in exactly the state ``save`` wrote."""
         path = Path(path)
+        from gridmap.files import FileInputError, check_regular_file
+
         try:
+            check_regular_file(path, "updater state file")
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 ref, hist = z["reference"], z["hist"]
-        # a truncated or foreign file: zipfile and numpy raise these (EOFError when empty)
-        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:
-            raise UpdaterError(f"{path}: not a readable updater state file: {e}") from None
+        except FileInputError as e:
+            raise UpdaterError(str(e)) from None
+        # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
+        # many kinds of error (EOFError when empty, zlib.error and tokenize's TokenError for
+        # overwritten bytes); whatever they raise, the file is not a state.
+        except Exception as e:  # noqa: BLE001
+            raise UpdaterError(f"{path}: not a readable updater state file "
+                               f"({type(e).__name__}: {' '.join(str(e).split())})") from None
         if not isinstance(meta, dict) or meta.get("format") != STATE_FORMAT:
             got = meta.get("format") if isinstance(meta, dict) else None
             raise UpdaterError(f"{path}: state format {got!r}, expected {STATE_FORMAT}")

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gridmap import Scan
+from gridmap import UNKNOWN, Scan
 
 from .config import UpdaterConfig
 
@@ -53,6 +53,12 @@ class Beams:
     raw_changes: int        # detected changes before the run filter
     changes: int            # detected changes kept by the run filter
     flag_capacity: int      # no evaluator can flag more cells than this in this scan
+    # per beam, for the lost check: the beam's own expected point, whether its virtual ray
+    # found a blocking cell, the ray's direction, and whether the beam is a detected change
+    own_expected: np.ndarray | None = None
+    own_found: np.ndarray | None = None
+    own_direction: np.ndarray | None = None
+    change: np.ndarray | None = None
 
 
 class Workspace:
@@ -171,13 +177,37 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     capacity = min(bound, ref.size)
     ws.for_flags(capacity)
     return Beams(sensor, ranges, ws.hits, pairing, tol, skip, np.full(n, cfg.free_fraction),
-                 ws.verdict, n_valid, raw, kept, capacity)
+                 ws.verdict, n_valid, raw, kept, capacity, ws.expected[::ratio][:n],
+                 ws.found[::ratio][:n], virtual[::ratio][:n], ws.change[:n])
 
 
-def is_lost(beams: Beams, cfg: UpdaterConfig) -> bool:
+def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
+                    found: np.ndarray) -> np.ndarray:
+    """Per beam: its expected ray stops at an unknown cell of M (or leaves the map, whose
+    outside is unknown). The expected point is where the ray enters that cell: a hair further
+    along the ray lies inside it."""
+    inside = expected + 1e-4 * directions
+    col = np.floor(inside[:, 0]).astype(np.int64)
+    row = np.floor(inside[:, 1]).astype(np.int64)
+    on_map = (col >= 0) & (row >= 0) & (col < ref.shape[1]) & (row < ref.shape[0])
+    cell = np.full(len(col), UNKNOWN, np.int8)
+    cell[on_map] = ref[row[on_map], col[on_map]]
+    return found & (cell == UNKNOWN)
+
+
+def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
     """More than ``lost_fraction`` of the valid beams disagree with the map (counted before the
-    run filter): the pose is probably wrong, so the scan is dropped."""
-    return beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid
+    run filter): the pose is probably wrong, so the scan is dropped. A beam that is a change
+    because it looks into unknown space says nothing of the pose (ALGORITHM.md, a partly
+    mapped place), so such a scan is dropped only if the beams whose expected ray ends in
+    known space are changes past ``lost_fraction`` too. (Never more scans than the paper's
+    rule: that is asked first, and costs nothing.)"""
+    if not (beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid):
+        return False
+    known = ~ends_in_unknown(ref, beams.own_expected, beams.own_direction, beams.own_found)
+    known &= ~np.isnan(beams.ranges)
+    n_known = int(np.count_nonzero(known))
+    return n_known > 0 and np.count_nonzero(known & beams.change) > cfg.lost_fraction * n_known
 
 
 # --- not in the paper: the seen-surface guard -------------------------------------------------

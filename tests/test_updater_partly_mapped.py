@@ -1,0 +1,54 @@
+"""A partly mapped place: beams that look into unknown space are changes only because the map
+does not know what is there, and they say nothing about the pose; the lost check leaves them
+out (ALGORITHM.md, "Lost check")."""
+
+import numpy as np
+
+from gridmap import UNKNOWN, Pose2D
+from updater import MapUpdater, ScanStatus, UpdaterConfig
+
+try:
+    import synthetic_room as world
+except ImportError:  # pragma: no cover
+    from tests import synthetic_room as world
+
+CONFIG = UpdaterConfig(gating=False)
+
+
+def partly_mapped():
+    """The room, but M knows only its left third: the rest is unknown."""
+    walls = world.room_walls()
+    grid = world.rasterise(walls)
+    grid.data[:, int(4.0 / world.RES):] = UNKNOWN
+    return walls, grid
+
+
+def test_scans_that_look_into_the_unknown_are_not_dropped_as_lost():
+    walls, ref = partly_mapped()
+    pose = Pose2D(3.5, 5.5, 0.0)                   # in the known part, facing the unknown
+    scan = world.partial_scan(walls, pose, 0.0, fov_deg=180.0, beams=361)
+    report = MapUpdater(ref, CONFIG).process(scan, pose)
+    assert report.raw_detected_changes > 0.8 * report.valid_beams    # lost by the old rule
+    assert report.status is ScanStatus.PROCESSED
+
+
+def test_a_wrong_pose_in_the_known_part_is_still_dropped_as_lost():
+    walls, ref = partly_mapped()
+    true = Pose2D(2.0, 5.5, 0.0)
+    scan = world.full_scan(walls, true, 0.0)
+    wrong = Pose2D(2.6, 5.0, 0.6)                  # 0.8 m and 34 degrees off
+    report = MapUpdater(ref, CONFIG).process(scan, wrong)
+    assert report.status is ScanStatus.LOST
+
+
+def test_in_a_fully_known_room_the_rule_is_the_old_one():
+    walls = world.room_walls()
+    ref = world.rasterise(walls)
+    pose = Pose2D(5.5, 5.5, 0.0)
+    scan = world.full_scan(walls, pose, 0.0)
+    wrong = Pose2D(6.3, 4.9, 0.7)
+    ok, lost = MapUpdater(ref, CONFIG).process(scan, pose), \
+        MapUpdater(ref, CONFIG).process(scan, wrong)
+    assert ok.status is ScanStatus.PROCESSED and lost.status is ScanStatus.LOST
+    # every valid beam's expected ray ends on a wall: the known beams are all the valid ones
+    assert lost.raw_detected_changes > 0.8 * lost.valid_beams

@@ -233,7 +233,8 @@ def _cmd_generate(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from .sweep import SweepError, run_sweep, summarise
+    from .study_report import summarise
+    from .sweep import SweepError, run_sweep
 
     if args.summarise is not None:
         table = summarise(args.summarise)

@@ -15,15 +15,16 @@ Sessions: W1 maps the warehouse along a serpentine through every aisle; each lat
 drives a transport loop through a few aisles and back to the dock, and has 2-6 rearrangements
 (moves, additions, removals), each placed validly and seen from that session's route and from
 its ``quick_route`` (an out-and-back into the first aisle of its loop, what ``--quick``
-drives): the object (or the place it left) takes lidar hits from at least ``SEEN_POSES`` poses
-along the route, within ``SEEN_RANGE``. People walk along the lanes and wander in the dock.
+drives): at least ``SEEN_CELLS`` cells of the object's outline (or of the place it left) take
+lidar hits within ``SEEN_RANGE`` from ``SEEN_POSES`` poses along the route or more, so the
+evaluation finds observable targets there. People walk along the lanes and wander in the dock.
 Numbers are rounded to the millimetre, so the file is the same for the same arguments.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,8 +35,8 @@ SIZE_MIN, SIZE_MAX = (15.0, 10.0), (60.0, 40.0)
 ROBOT_RADIUS = 0.35
 LANE_CLEARANCE = 0.3      # [m] beyond the robot's radius: lanes stay clear, as a warehouse keeps them
 OBJECT_GAP = 0.1          # [m] between any two objects
-SEEN_POSES = 8            # route poses (every ROUTE_STEP m) from which a change must take hits
-SEEN_HITS = 3             # ... at least this many hits each
+SEEN_POSES = 9            # route poses (every ROUTE_STEP m) from which ...
+SEEN_CELLS = 6            # ... at least this many cells of a change's outline are hit
 SEEN_RANGE = 9.5          # [m] hits further than this do not count (the evaluation's 10 m)
 ROUTE_STEP = 0.5          # [m]
 QUICK_DEPTH = 12.0        # [m] how far the quick route goes into its aisle
@@ -91,16 +92,21 @@ def check_arguments(size, sessions: int, fov: int) -> tuple[float, float]:
 
 # --- the building ----------------------------------------------------------------------------
 def _rack_rows(rng, y_lo: float, y_hi: float) -> list[tuple[float, float]]:
-    """(y_bottom, y_top) of each rack row between the dock strip and the north strip."""
+    """(y_bottom, y_top) of each rack row between the dock strip and the north strip: single
+    racks or back to back, with aisles of 1.8-3.4 m between them."""
     rows, y = [], y_lo
     while True:
-        depth = float(rng.choice([0.9, 1.1, 2.0]))      # single racks or back to back
+        depth = float(rng.choice([0.9, 1.1, 2.0]))
         if y + depth > y_hi:
-            break
+            depth = 0.9
+            if y + depth > y_hi:
+                break
         rows.append((y, y + depth))
-        y += depth + float(rng.uniform(1.8, 3.4))       # the aisle after it
-        if y + 0.9 > y_hi:
+        y += depth
+        room = y_hi - y - 0.9         # an aisle and one more single rack must fit
+        if room < 1.8:
             break
+        y += min(float(rng.uniform(1.8, 3.4)), room)
     return rows
 
 
@@ -276,8 +282,8 @@ def lidar_hits(layout: Layout, objects, poses: np.ndarray) -> np.ndarray:
 
 
 def seen_in(hits: np.ndarray, target) -> bool:
-    """Whether at least SEEN_POSES of the scans of ``hits`` (from ``lidar_hits``) put SEEN_HITS
-    hits on ``target``."""
+    """Whether the scans of ``hits`` (from ``lidar_hits``) see ``target`` as the evaluation
+    needs: at least SEEN_CELLS cells of its outline (5 cm) hit from SEEN_POSES scans or more."""
     from sim import geometry as geo
 
     reach = target.radius if target.is_circle else math.hypot(*target.size) / 2
@@ -288,8 +294,11 @@ def seen_in(hits: np.ndarray, target) -> bool:
     pts = hits[pose, beam]
     d = geo.point_circle_distance(pts, target.circle()[None]) if target.is_circle else \
         geo.point_box_distance(pts, target.box()[None])
-    per_pose = np.bincount(pose[np.abs(d[:, 0]) < 0.03], minlength=hits.shape[0])
-    return int((per_pose >= SEEN_HITS).sum()) >= SEEN_POSES
+    on = np.abs(d[:, 0]) < 0.03
+    cells = np.floor(pts[on] / 0.05).astype(np.int64)
+    seen = np.unique(np.column_stack([pose[on], cells]), axis=0)   # (scan, cell) once each
+    _, per_cell = np.unique(seen[:, 1:], axis=0, return_counts=True)
+    return int((per_cell >= SEEN_POSES).sum()) >= SEEN_CELLS
 
 
 def _lidar_spec(layout: Layout):
@@ -310,13 +319,35 @@ class _Session:
     movable: dict            # id -> sim.Obstacle, as the world stands now
     views: tuple             # pose arrays of the route and of the quick route
     area: tuple              # (x_lo, y_lo, x_hi, y_hi) where new places are drawn
+    touched: set = field(default_factory=set)   # ids this session changed already
+    places: list = field(default_factory=list)  # (object, stands there now) of each change
 
     def objects(self, without: str | None = None, extra=None) -> list:
         objs = [o for o in self.movable.values() if o.id != without]
         return list(self.layout.static) + objs + ([extra] if extra is not None else [])
 
-    def seen(self, target, objects) -> bool:
-        return all(seen_in(lidar_hits(self.layout, objects, p), target) for p in self.views)
+    def keeps_in_view(self, objects, new_places) -> bool:
+        """Whether, with ``objects`` standing, both routes see every place this session changed
+        (``places`` and ``new_places``): an object standing there, or the place an object left
+        (as if it stood there still: the beams reach it), so no change hides another."""
+        places = self.places + new_places
+        for view in self.views:
+            view = _near(view, [o for o, _ in places])
+            hits = lidar_hits(self.layout, objects, view)
+            for o, present in places:
+                h = hits if present else lidar_hits(self.layout, objects + [o], view)
+                if not seen_in(h, o):
+                    return False
+        return True
+
+    def vacated(self) -> list:
+        """The places objects left this session: nothing new may stand there, or the session
+        would not show them free."""
+        return [o for o, present in self.places if not present]
+
+    def commit(self, new_places) -> None:
+        self.places += new_places
+        self.touched.update(o.id for o, _ in new_places)
 
     def seen_now(self) -> list[str]:
         """The movable objects both routes see as the world stands."""
@@ -326,8 +357,17 @@ class _Session:
                 if x0 - 1 <= o.center[0] <= x1 + 1 and y0 - 1 <= o.center[1] <= y1 + 1]
         if not near:
             return []
-        hits = [lidar_hits(self.layout, self.objects(), p) for p in self.views]
-        return [o.id for o in near if all(seen_in(h, o) for h in hits)]
+        hits = [lidar_hits(self.layout, self.objects(), _near(p, near)) for p in self.views]
+        return [o.id for o in near if o.id not in self.touched
+                and all(seen_in(h, o) for h in hits)]
+
+
+def _near(poses: np.ndarray, objects) -> np.ndarray:
+    """The poses within SEEN_RANGE of any of ``objects``: the others cannot see them."""
+    keep = np.zeros(len(poses), bool)
+    for o in objects:
+        keep |= np.hypot(poses[:, 0] - o.center[0], poses[:, 1] - o.center[1]) < SEEN_RANGE + 1
+    return poses[keep]
 
 
 def _view_area(layout: Layout, quick) -> tuple:
@@ -345,10 +385,12 @@ def _move(rng, s: _Session, oid: str) -> dict | None:
         x, y = _r(rng.uniform(a[0], a[2])), _r(rng.uniform(a[1], a[3]))
         yaw = 0.0 if old.is_circle else float(rng.choice([0.0, 1.5708]))
         new = old.moved(x, y, yaw)
-        if math.dist(old.center, new.center) < 1.0 or not _fits(new, s.layout, s.objects(oid)):
+        if math.dist(old.center, new.center) < 1.0 or not _fits(new, s.layout,
+                                                                   s.objects(oid) + s.vacated()):
             continue
-        if s.seen(new, s.objects(oid, new)):
+        if s.keeps_in_view(s.objects(oid, new), [(old, False), (new, True)]):
             s.movable[oid] = new
+            s.commit([(old, False), (new, True)])
             return {"move": oid, "to": [x, y] if old.is_circle else [x, y, yaw]}
     return None
 
@@ -356,28 +398,34 @@ def _move(rng, s: _Session, oid: str) -> dict | None:
 def _add(rng, s: _Session, counters: dict) -> dict | None:
     kind = str(rng.choice(["pallet", "pallet", "drum", "box"]))
     oid = f"{kind}_{counters[kind] + 1}"
-    o = _place(rng, (oid, kind), s.layout, s.objects(), s.area,
-               accept=lambda o: s.seen(o, s.objects(extra=o)))
+    o = _place(rng, (oid, kind), s.layout, s.objects() + s.vacated(), s.area,
+               accept=lambda o: s.keeps_in_view(s.objects(extra=o), [(o, True)]))
     if o is None:
         return None
     counters[kind] += 1
     s.movable[oid] = o
+    s.commit([(o, True)])
     return {"add": _object_dict(o)}
 
 
 def _changes(rng, s: _Session, counters: dict) -> list[dict]:
     """2-6 moves, additions and removals, each of an object (or place) the session sees."""
     out = []
-    for _ in range(int(rng.integers(2, 7))):
+    wanted = int(rng.integers(2, 7))
+    for _ in range(3 * wanted):         # a change that finds no place is drawn again
+        if len(out) == wanted:
+            break
         kind = str(rng.choice(["move", "add", "remove"]))
         seen = s.seen_now()
         change = None
         if kind != "add" and seen:
             oid = str(rng.choice(seen))
-            if kind == "remove":
+            gone = s.movable[oid]
+            if kind == "remove" and s.keeps_in_view(s.objects(oid), [(gone, False)]):
                 del s.movable[oid]
+                s.commit([(gone, False)])
                 change = {"remove": oid}
-            else:
+            elif kind == "move":
                 change = _move(rng, s, oid)
         if change is None:
             change = _add(rng, s, counters)
@@ -450,7 +498,8 @@ def generate(seed: int, size=(30.0, 20.0), sessions: int = 4, fov: int = 270) ->
     tree_sessions = [{"name": "W1", "mapping": True, "route": _points(mapping_route(layout))}]
     for i in range(1, sessions):
         route, quick = _transport(rng, layout)
-        views = tuple(_route_poses(layout.start, r) for r in (route, quick))
+        # the quick route first: it is the shorter, so a place it misses is given up sooner
+        views = tuple(_route_poses(layout.start, r) for r in (quick, route))
         state = _Session(layout, movable, views, _view_area(layout, quick))
         entry = {"name": f"W{i + 1}", "changes": _changes(rng, state, counters),
                  "people": _people(rng, layout)}

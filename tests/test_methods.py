@@ -95,3 +95,32 @@ def test_fuse_draws_an_added_box_and_frees_a_removed_one(maps):
     for w in world.room_walls():
         walls |= world.cells_of(w)
     assert (data[walls & (ref == OCCUPIED)] == FREE).mean() < 0.01   # the walls stay
+
+
+def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys):
+    from scenarios.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "--method", "remapp", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["mapupdate run: error: --method: unknown method 'remapp' (did you mean "
+                   "'remap'?) (methods: paper, none, remap, fuse)"]
+    assert not out.exists()
+
+
+def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path):
+    gymnasium = pytest.importorskip("gymnasium")
+    from scenarios.generate import write_generated
+    from scenarios.methods import KeepMap
+
+    path = str(write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2))
+    with pytest.raises(MethodError, match="did you mean 'fuse'"):
+        gymnasium.make("WarehouseMapUpdate-v0", scenario=path, method="fusee")
+    env = gymnasium.make("WarehouseMapUpdate-v0", scenario=path, quick=True, method="none")
+    env.reset(seed=1)
+    for _ in range(60):
+        *_, info = env.step([0.4, 0.0])
+    assert isinstance(env.unwrapped.session.updater, KeepMap)
+    assert info["scans"] >= 0 and info["updater_changed_cells"] == 0
+    assert env.unwrapped.session.pipeline.counts.scans_processed > 0
+    env.close()

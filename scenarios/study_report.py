@@ -16,7 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED
+from gridmap import FREE, OCCUPIED, MapUpdatingError
+
+class StudyFolderError(MapUpdatingError, ValueError):
+    """A folder that holds no study to summarise."""
+
 
 # The columns of results.csv after scenario, seed, method, session and before the grid keys.
 METRICS = ("opdf", "precision", "recall", "ghosts", "g_freed", "ape_rmse", "wall_s", "f1",
@@ -70,9 +74,7 @@ def collect(out_dir) -> tuple[list[dict], list[str]]:
     try:
         sweep = json.loads((out_dir / "sweep.json").read_text())
     except FileNotFoundError:
-        from .sweep import SweepError
-
-        raise SweepError(f"{out_dir}: not a study folder (no sweep.json)") from None
+        raise StudyFolderError(f"{out_dir}: not a study folder (no sweep.json)") from None
     grid = list(sweep["spec"].get("grid", {}))
     rows = []
     for key in sweep["runs"]:

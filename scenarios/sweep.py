@@ -423,7 +423,7 @@ def _dispatch(todo, runs_dir, workers: int, ray: str | None):
         if ray is not None:
             from .sweep_ray import ray_tasks
 
-            yield from ray_tasks(todo, runs_dir, ray, workers)
+            yield from ray_tasks(execute, todo, runs_dir, ray, workers)
         elif workers == 1 or len(todo) <= 1:
             yield from _sequential(todo, runs_dir)
         else:

@@ -41,10 +41,8 @@ def start(address: str, workers: int | None = None):
     return ray
 
 
-def ray_tasks(runs, runs_dir, address: str, workers: int | None = None):
-    """Yield (run, record) as the Ray tasks of ``runs`` finish."""
-    from .sweep import execute
-
+def ray_tasks(execute, runs, runs_dir, address: str, workers: int | None = None):
+    """Yield (run, record) as the Ray tasks ``execute(run, runs_dir)`` of ``runs`` finish."""
     ray = start(address, workers)
     task = ray.remote(num_cpus=1, max_retries=0)(execute)
     pending = {task.remote(run, str(Path(runs_dir).resolve())): run for run in runs}

@@ -163,3 +163,14 @@ def test_grid_points_become_columns_and_rows_of_the_summary(tmp_path):
     summary = (out / "summary.md").read_text()
     assert "| method | updater.threshold | runs |" in summary
     assert "| paper | 6 | 1 |" in summary and "| paper | 8 | 1 |" in summary
+
+
+def test_ray_is_imported_by_one_module_only():
+    import re
+
+    pattern = re.compile(r"^\s*(import|from)\s+ray\b", re.M)
+    users = sorted(str(p.relative_to(ROOT)) for pkg in ("gridmap", "sim", "updater",
+                                                        "localization", "evaluation",
+                                                        "robotlogs", "scenarios")
+                   for p in (ROOT / pkg).rglob("*.py") if pattern.search(p.read_text()))
+    assert users == ["scenarios/sweep_ray.py"]

@@ -1,6 +1,7 @@
 """What a study leaves behind: ``results.csv`` (one row per run and update session),
 ``summary.md`` (per method and grid point, the mean and a 95 % confidence interval of every
-metric over the runs) and box plots of OPDF, precision, recall and ghosts by method.
+metric over the runs) and box plots of OPDF, precision, recall and ghosts by method
+(``fig_<metric>.png``, and the four side by side in ``fig_overview.png``).
 
 ``summarise(DIR)`` builds them from whatever runs of ``DIR`` have finished
 (``mapupdate sweep --summarise DIR``); every file is written atomically.
@@ -157,23 +158,32 @@ def summary_markdown(rows: list[dict], grid: list[str]) -> str:
 
 
 # --- figures --------------------------------------------------------------------------------------
-def box_plot(rows: list[dict], grid: list[str], metric: str, path: Path) -> None:
+def _boxes(ax, rows: list[dict], grid: list[str], metric: str) -> None:
     """One box per method and grid point over the runs' means of ``metric``."""
+    labels, data = [], []
+    for (method, values), runs in _groups(rows, grid).items():
+        v = [x for x in run_means(runs, metric) if x is not None]
+        labels.append(method + "".join(f"\n{k}={x}" for k, x in zip(grid, values)))
+        data.append(v if v else [np.nan])
+    ax.boxplot(data, tick_labels=labels, showmeans=True)
+    ax.set_title(f"{metric} per run (mean over its update sessions)", fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+
+
+def box_plot(rows: list[dict], grid: list[str], metrics, path: Path) -> None:
+    """fig_<metric>.png for one metric, or side by side for several."""
     from gridmap.atomic import write_with
 
     from .report import _pyplot
 
     plt = _pyplot()
-    groups = _groups(rows, grid)
-    labels, data = [], []
-    for (method, values), runs in groups.items():
-        v = [x for x in run_means(runs, metric) if x is not None]
-        labels.append(method + "".join(f"\n{k}={x}" for k, x in zip(grid, values)))
-        data.append(v if v else [np.nan])
-    fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(labels) + 1), 3.6))
-    ax.boxplot(data, tick_labels=labels, showmeans=True)
-    ax.set_title(f"{metric} per run (mean over its update sessions)")
-    ax.grid(axis="y", alpha=0.3)
+    metrics = [metrics] if isinstance(metrics, str) else list(metrics)
+    n_boxes = len(_groups(rows, grid))
+    width = max(4.0, 1.2 * n_boxes + 1)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(width * len(metrics), 3.6),
+                             squeeze=False)
+    for ax, metric in zip(axes[0], metrics):
+        _boxes(ax, rows, grid, metric)
     write_with(path, lambda f: fig.savefig(f, format="png", dpi=110, bbox_inches="tight"))
     plt.close(fig)
 
@@ -190,5 +200,6 @@ def summarise(out_dir) -> int:
     if rows:
         for metric in FIGURES:
             box_plot(rows, grid, metric, out_dir / f"fig_{metric}.png")
+        box_plot(rows, grid, FIGURES, out_dir / "fig_overview.png")
     return len({(r["scenario"], r["seed"], r["method"], tuple(r.get(k) for k in grid))
                 for r in rows})

@@ -124,3 +124,19 @@ def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path)
     assert info["scans"] >= 0 and info["updater_changed_cells"] == 0
     assert env.unwrapped.session.pipeline.counts.scans_processed > 0
     env.close()
+
+
+def test_a_resumed_run_keeps_its_method_and_refuses_another(tmp_path):
+    from scenarios.checkpoint import ResumeError
+    from scenarios.generate import write_generated
+    from scenarios.runner import RunOptions, run_scenario
+
+    path = write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2)
+    out = tmp_path / "run"
+    run_scenario(path, RunOptions(out=out, sessions=1, quick=True, progress=False,
+                                  method="fuse"))
+    with pytest.raises(ResumeError, match="method = fuse, not remap"):
+        run_scenario(None, RunOptions(out=out, resume=True, progress=False, method="remap"))
+    resumed = run_scenario(None, RunOptions(out=out, resume=True, sessions=2, progress=False))
+    assert resumed.metrics["method"] == "fuse" and len(resumed.metrics["sessions"]) == 2
+    assert "method fuse" in (out / "report.md").read_text()

@@ -12,16 +12,23 @@ machines of this kind with the measured pool efficiency.
 Bar (exit 1 when missed): the pool does at least 1.7x the runs per minute of one process on 2
 cores, and Ray's overhead is at most 1 s per run.
 
-    python benchmarks/bench_sweep.py [--layouts 2] [--seeds 2] [--workers 2]
+    python benchmarks/bench_sweep.py [--layouts 3] [--seeds 2] [--workers 2]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+# one thread per process, in this one and in the workers it starts (they inherit it): the pool
+# is then compared with one process that uses one core, as each of its workers does
+for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[var] = "1"
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -30,7 +37,7 @@ STUDY_RUNS = 10_000
 
 def write_spec(folder: Path, layouts: int, seeds: int) -> Path:
     """The layouts' files and a spec naming them (so no sweep times their generation)."""
-    from scenarios.generate import write_generated
+    from scenarios.generator import write_generated
 
     files = [str(write_generated(100 + k, folder / f"layout_{k}.yaml")) for k in range(layouts)]
     spec = folder / "spec.yaml"
@@ -59,6 +66,12 @@ def empty_task_cost(ray, n: int = 200) -> float:
     return (time.perf_counter() - t0) / n
 
 
+def _children_cpu() -> float:
+    """[s] CPU time of the finished child processes (the pool's workers)."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def measure(layouts: int, seeds: int, workers: int) -> dict:
     from scenarios import sweep_ray
 
@@ -69,7 +82,9 @@ def measure(layouts: int, seeds: int, workers: int) -> dict:
         # one run first, so that the kernels are compiled and cached before anything is timed
         timed_sweep(write_spec(tmp / "warm", 1, 1), tmp / "warm_out", workers=1)
         sequential = timed_sweep(spec, tmp / "sequential", workers=1)
+        cpu0 = _children_cpu()
         pool = timed_sweep(spec, tmp / "pool", workers=workers)
+        pool_cpu = _children_cpu() - cpu0
         t0 = time.perf_counter()
         ray = sweep_ray.start("auto", workers)
         ray_start = time.perf_counter() - t0
@@ -77,6 +92,7 @@ def measure(layouts: int, seeds: int, workers: int) -> dict:
         empty = empty_task_cost(ray)
         ray.shutdown()
     return {"runs": n, "workers": workers, "sequential_s": sequential, "pool_s": pool,
+            "pool_cpu_s": pool_cpu,
             "ray_s": on_ray, "ray_start_s": ray_start, "empty_task_s": empty}
 
 
@@ -92,6 +108,9 @@ def print_tables(m: dict) -> bool:
                        ("ray", f"Ray, {w} CPUs")):
         print(f"| {label} | {m[f'{key}_s']:.1f} | {per_min[key]:.2f} | "
               f"{per_min[key] / per_min['sequential']:.2f}x |")
+    print(f"\nThe pool's workers used {m['pool_cpu_s']:.1f} s of CPU in its {m['pool_s']:.1f} s: "
+          f"{m['pool_cpu_s'] / m['pool_s']:.2f} cores busy on average (one process: "
+          f"{m['sequential_s'] / n:.1f} s per run).")
     print(f"\nRay: start-up {m['ray_start_s']:.1f} s once; overhead per run against the pool "
           f"{overhead:+.2f} s; an empty task {1000 * m['empty_task_s']:.2f} ms.")
     cost = m["sequential_s"] / n                  # [s] of one core per run
@@ -112,7 +131,7 @@ def print_tables(m: dict) -> bool:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--layouts", type=int, default=2)
+    ap.add_argument("--layouts", type=int, default=3)
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)

@@ -224,7 +224,7 @@ def _add_render(sub) -> None:
 
 
 def _cmd_generate(args) -> int:
-    from .generate import write_generated
+    from .generator import write_generated
 
     path = write_generated(args.seed, args.out, size=tuple(args.size), sessions=args.sessions,
                            fov=args.fov)

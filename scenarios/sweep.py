@@ -161,7 +161,7 @@ def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
 
 
 def _generate_entry(node, source: str, key: str) -> dict:
-    from .generate import check_arguments
+    from .generator import check_arguments
 
     node = _check_keys(node, GENERATE_KEYS, source, key)
     if "seeds" not in node:
@@ -231,7 +231,7 @@ def scenario_files(spec: dict, out_dir: Path, progress: bool = False) -> list[tu
     ``DIR/scenarios/`` unless already there (generation is deterministic)."""
     import sim
 
-    from .generate import write_generated
+    from .generator import write_generated
 
     out = []
     for entry in spec["scenarios"]:

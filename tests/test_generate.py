@@ -1,5 +1,6 @@
-"""Generated warehouses (scenarios.generate, `mapupdate generate`): valid scenarios, the same
-file for the same seed, and rearrangements that the session's route can observe."""
+"""Generated warehouses (scenarios/generator.py: `scenarios.generate`, `mapupdate generate`):
+valid scenarios, the same file for the same seed, and rearrangements that the session's route
+can observe."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import evaluation as ev
 import sim
 from gridmap import Pose2D
 from scenarios.cli import main
-from scenarios.generate import GenerateError, ROUTE_STEP, generate, scenario_yaml, write_generated
+from scenarios.generator import GenerateError, ROUTE_STEP, generate, scenario_yaml, write_generated
 from sim import lidar as lid
 
 
@@ -124,6 +125,13 @@ def test_ten_seeds_validate_and_every_change_leaves_observable_targets_on_its_ro
 def test_forty_seeds_more_validate_and_leave_observable_targets():
     """With the fast test's ten: fifty generated seeds."""
     _check_seeds(range(10, 50))
+
+
+def test_the_package_offers_generate():
+    import scenarios
+
+    assert scenarios.generate(9, size=(15, 10), sessions=2) == generate(9, size=(15, 10),
+                                                                        sessions=2)
 
 
 def test_the_text_is_the_tree():

@@ -110,7 +110,7 @@ def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys)
 
 def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path):
     gymnasium = pytest.importorskip("gymnasium")
-    from scenarios.generate import write_generated
+    from scenarios.generator import write_generated
     from scenarios.methods import KeepMap
 
     path = str(write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2))
@@ -128,7 +128,7 @@ def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path)
 
 def test_a_resumed_run_keeps_its_method_and_refuses_another(tmp_path):
     from scenarios.checkpoint import ResumeError
-    from scenarios.generate import write_generated
+    from scenarios.generator import write_generated
     from scenarios.runner import RunOptions, run_scenario
 
     path = write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2)

@@ -26,10 +26,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gridmap import MapUpdatingError
+
+if TYPE_CHECKING:
+    import sim
 
 SIZE_MIN, SIZE_MAX = (15.0, 10.0), (60.0, 40.0)
 ROBOT_RADIUS = 0.35
@@ -110,7 +114,7 @@ def _rack_rows(rng, y_lo: float, y_hi: float) -> list[tuple[float, float]]:
     return rows
 
 
-def _racks(rng, rows, x_lo: float, x_hi: float):
+def _racks(rows, x_lo: float, x_hi: float):
     import sim
 
     length = x_hi - x_lo
@@ -132,7 +136,7 @@ def _layout(rng, w: float, h: float, fov: int) -> Layout:
     north = float(np.clip(0.15 * h, 2.2, 3.2))
     cross_w, cross_e = float(rng.uniform(3.0, 4.0)), float(rng.uniform(3.0, 4.0))
     rows = _rack_rows(rng, y0 + dock, y1 - north)
-    racks = _racks(rng, rows, x0 + cross_w, x1 - cross_e)
+    racks = _racks(rows, x0 + cross_w, x1 - cross_e)
     # a lane down the middle of every band between racks (and walls)
     edges = [y0] + [v for row in rows for v in row] + [y1]
     strips = [(edges[k], edges[k + 1]) for k in range(0, len(edges), 2)]
@@ -151,7 +155,7 @@ def _pillars(rng, layout: Layout) -> list:
     x0, y0, x1, y1 = layout.bounds
     n = max(2, int((x1 - x0) * (y1 - y0) // 120))
     out: list = []
-    for k in range(TRIES):
+    for _ in range(TRIES):
         if len(out) == n:
             break
         c = (_r(rng.uniform(x0 + 0.3, x1 - 0.3)), _r(rng.uniform(y0 + 0.3, y1 - 0.3)))
@@ -194,7 +198,7 @@ def _overlap(a, b) -> bool:
     return geo.boxes_overlap(a.box(), b.box())
 
 
-def _new_object(rng, oid_kind: tuple[str, str], area) -> object:
+def _new_object(rng, oid_kind: tuple[str, str], area) -> sim.Obstacle:
     """An object of ``kind`` (pallet, drum, box) with its centre drawn in ``area``
     (x_lo, y_lo, x_hi, y_hi)."""
     import sim

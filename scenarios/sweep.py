@@ -313,6 +313,12 @@ def execute(run: RunSpec, runs_dir) -> dict:
     from .study_report import session_rows
 
     folder = Path(runs_dir) / run.key
+    if folder.exists():
+        # a run a killed sweep left unfinished (no result.json): the sweep's own output,
+        # played again from the start, since a new run never goes into a folder holding one
+        import shutil
+
+        shutil.rmtree(folder)
     config = load_robot_config(run.config or None, source=run.key)
     clock = SessionClock()
     t0 = time.perf_counter()

@@ -10,7 +10,12 @@ buffers            2               uint16 shift registers of the last N_b flags
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan
+hit buffers        2               uint16 shift registers of hits in open unknown space
+drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
 =================  ==============  ==========================================================
+
+The last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
+it off they take no room).
 
 A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
 unique with the scan-mark bits (set when a cell is listed, cleared after the push), never by

@@ -15,7 +15,7 @@ drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
 =================  ==============  ==========================================================
 
 The last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
-it off they take no room).
+it off the hit buffers and hit marks take no room).
 
 A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
 unique with the scan-mark bits (set when a cell is listed, cleared after the push), never by

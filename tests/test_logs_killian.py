@@ -4,7 +4,7 @@ last third through ``update_from_log``, must free no cell of a surface that both
 have occupied, and move no further from the last third's map (CC and OPDF over the cells both
 observed). Also the time it takes, per 1000 scans.
 
-Of the 2 323 cells occupied in both thirds' maps, 3 are freed: specks with at most one
+Of the 2 323 cells occupied in both thirds' maps, 2 are freed: specks with at most one
 occupied neighbour in the first third's map, in open floor that the first third saw from afar
 with a few rays and the last third crosses; one hit makes a cell occupied in a log-odds map,
 and the last third's scans see through them 7 times in 10. Every cell with two or more

@@ -510,23 +510,28 @@ def unpack(bits, shape):
     return np.unpackbits(bits, bitorder="little")[:shape[0] * shape[1]].reshape(shape) == 1
 
 
-def ref_seen_surfaces(data, enclosed, hits, verdict, radius):
-    """Cells (H, W) within ``radius`` of a valid hit that are occupied, or unknown and not in
-    an enclosed region: the distance from a hit to a cell is to the cell's nearest point."""
+def ref_seen_surfaces(data, enclosed, hits, verdict, radius, unknown_radius=None):
+    """Cells (H, W) within ``radius`` of a valid hit that are occupied, or within
+    ``unknown_radius`` (default ``radius``) and unknown and not in an enclosed region: the
+    distance from a hit to a cell is to the cell's nearest point."""
+    unknown_radius = radius if unknown_radius is None else unknown_radius
     rows, cols = np.mgrid[0:data.shape[0], 0:data.shape[1]]
     near = np.zeros(data.shape, bool)
+    near_unknown = np.zeros(data.shape, bool)
     for (x, y), v in zip(hits, verdict):
         if v != K.INVALID:
             dx = np.maximum.reduce([cols - x, np.zeros(data.shape), x - cols - 1.0])
             dy = np.maximum.reduce([rows - y, np.zeros(data.shape), y - rows - 1.0])
             near |= dx**2 + dy**2 <= radius**2
-    return near & ((data == OCC) | ((data == UNK) & ~enclosed))
+            near_unknown |= dx**2 + dy**2 <= unknown_radius**2
+    return (near & (data == OCC)) | (near_unknown & (data == UNK) & ~enclosed)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 3])
-def test_seen_surface_guard_step_against_reference(seed):
+@pytest.mark.parametrize("seed, grow", [(0, True), (1, True), (3, True), (0, False)])
+def test_seen_surface_guard_step_against_reference(seed, grow):
+    # growing into the unknown, the guard keeps open unknown cells within one cell of a hit
     data, scan, sensor = room_scene(seed)
-    cfg = UpdaterConfig()
+    cfg = UpdaterConfig(grow_into_unknown=grow)
     enclosed_bits, _ = steps.enclosed_unknown(data, 10**6)
     enclosed = unpack(enclosed_bits, data.shape)
     ws = steps.Workspace()
@@ -534,7 +539,8 @@ def test_seen_surface_guard_step_against_reference(seed):
     assert beams.changes > 0 and enclosed.sum() > 100
     marks = np.zeros((data.size + 7) // 8, np.uint8)
     n_guarded = steps.guard_seen_surfaces(data, beams, cfg, 0.05, marks, enclosed_bits, ws)
-    guarded = ref_seen_surfaces(data, enclosed, beams.hits, beams.verdict, 0.075 / 0.05)
+    guarded = ref_seen_surfaces(data, enclosed, beams.hits, beams.verdict, 0.075 / 0.05,
+                                1.0 if grow else None)
     assert (unpack(marks, data.shape) == guarded).all() and n_guarded == guarded.sum() > 50
     # the removed-obstacle walk passes the guarded cells by, and only those
     n, n_new = steps.flag_changed_cells(data, beams, marks, ws)

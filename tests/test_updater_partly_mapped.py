@@ -52,3 +52,39 @@ def test_in_a_fully_known_room_the_rule_is_the_old_one():
     assert ok.status is ScanStatus.PROCESSED and lost.status is ScanStatus.LOST
     # every valid beam's expected ray ends on a wall: the known beams are all the valid ones
     assert lost.raw_detected_changes > 0.8 * lost.valid_beams
+
+
+def _drive_into_the_unknown(config):
+    """Circle the room (its right two thirds unknown in M) with exact poses and odometry."""
+    walls, ref = partly_mapped()
+    updater = MapUpdater(ref, config)
+    for true, _, t in world.Drive(seconds=60.0, pos_noise=0.0, yaw_noise=0.0).steps():
+        updater.process(world.full_scan(walls, true, t), true, odometry=true)
+    return walls, ref, updater
+
+
+def test_the_map_grows_into_the_unknown_part_by_the_same_buffers():
+    """Seen through, the unknown part becomes free; hit, its walls are drawn (T of N_b hits);
+    with ``grow_into_unknown`` off it stays unknown apart from what detected changes free."""
+    walls, ref, updater = _drive_into_the_unknown(UpdaterConfig())
+    out = updater.updated_map().data
+    unknown = ref.data == UNKNOWN
+    inside = world.cells_of(world.Rect(4.5, 1.0, 10.0, 10.0))
+    whole = world.rasterise(walls).data
+    # the walls' inner faces there: wall cells beside the room's free space
+    walls_there = unknown & (whole == 100) & world.dilate(whole == 0, 1)
+    assert (out[inside & unknown] == 0).mean() > 0.95                 # free
+    drawn = (out == 100) & unknown
+    assert (drawn & walls_there).sum() > 0.8 * walls_there.sum()
+    assert not np.any(drawn & ~world.dilate(walls_there, 1))          # nothing else drawn
+    assert len(updater.drawn_cells()[0]) == int(drawn.sum())
+    _, _, plain = _drive_into_the_unknown(UpdaterConfig(grow_into_unknown=False))
+    assert not np.any((plain.updated_map().data == 100) & unknown)
+
+
+def test_hit_buffers_are_saved_and_loaded_with_the_state(tmp_path):
+    _, _, updater = _drive_into_the_unknown(UpdaterConfig())
+    updater.save(tmp_path / "s.npz")
+    loaded = MapUpdater.load(tmp_path / "s.npz")
+    assert np.array_equal(loaded.updated_map().data, updater.updated_map().data)
+    assert len(loaded.drawn_cells()[0]) == len(updater.drawn_cells()[0]) > 100

@@ -202,7 +202,10 @@ def test_last_check_closes_a_cut_object_against_its_unknown_interior():
     interior = world.cells_of(block) & (ref.data == UNKNOWN)
     results = {}
     for last_check in (True, False):
-        updater, _, _ = drive(ref, walls + [kept], UpdaterConfig(last_check=last_check))
+        # without the last check the interior is no longer enclosed, and the growth into the
+        # unknown would close the cut from the kept half's hits: off here, to see the check
+        updater, _, _ = drive(ref, walls + [kept], UpdaterConfig(
+            last_check=last_check, grow_into_unknown=last_check))
         out = updater.updated_map().data
         assert updater.enclosed_unknown()[interior].all() == last_check
         # an unknown cell of the interior that touches a free cell is a hole in the outline
@@ -234,7 +237,12 @@ def test_last_check_draws_no_wall_along_unknown_that_reaches_the_map_border():
     door = world.cells_of(east) & (ref.data == OCCUPIED)
     assert (out[door] == FREE).mean() > 0.5         # the door is seen open
     assert not updater.enclosed_unknown().any()
-    assert ((ref.data == UNKNOWN) & (out == OCCUPIED)).sum() == 0
+    # no wall along the unknown beyond the door; the wall 0.3 m out, which the scans through
+    # the door hit, is drawn (the growth into the unknown), and nothing else there: within two
+    # cells of it, as the drive's 1 deg of pose noise scatters hits 5 m out by 9 cm
+    far = world.dilate(world.cells_of(world_walls[-1]), 2)
+    drawn = (ref.data == UNKNOWN) & (out == OCCUPIED)
+    assert drawn.sum() > 50 and not np.any(drawn & ~far)
 
 
 def _fragmented_outline(box_cells: np.ndarray, keep: int = 3, gap: int = 6) -> np.ndarray:

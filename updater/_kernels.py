@@ -306,16 +306,17 @@ def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
 
 # --- seen-surface guard (not in the paper) ----------------------------------------------------
 @njit(cache=True)
-def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, marks, out):
+def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, marks, out):
     """Mark (in ``marks``, so the removed-obstacle walk passes them by) the cells of ``ref``
     that come within ``radius`` (grid units) of the hit point of any valid beam and are
-    occupied, or unknown outside the ``enclosed`` regions, and list them in ``out``. Enclosed
-    unknown cells (an object's interior) are left to the walk: a hit near one is on the face
-    of whatever still stands beside it, and the last check closes what stays unknown next to a
-    freed cell. Returns the count listed."""
+    occupied, or within ``unknown_radius`` and unknown outside the ``enclosed`` regions, and
+    list them in ``out``. Enclosed unknown cells (an object's interior) are left to the walk: a
+    hit near one is on the face of whatever still stands beside it, and the last check closes
+    what stays unknown next to a freed cell. Returns the count listed."""
     height, width = ref.shape
     n = 0
     r2 = radius * radius
+    u2 = unknown_radius * unknown_radius
     for i in range(hits.shape[0]):
         if verdict[i] == INVALID:
             continue
@@ -330,7 +331,8 @@ def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, marks, out):
                     continue
                 dx = max(col - x, 0.0, x - col - 1.0)
                 idx = row * width + col
-                if dx * dx + dy * dy > r2 or (v != OCC and bit_get(enclosed, idx)):
+                if dx * dx + dy * dy > (r2 if v == OCC else u2) or \
+                        (v != OCC and bit_get(enclosed, idx)):
                     continue
                 if test_and_set(marks, idx):
                     out[n] = idx
@@ -399,6 +401,117 @@ def flag_occupied_unchanged(ref, hits, verdict, marks, out, n):
                     out[n] = row * width + col
                     n += 1
     return n
+
+
+# --- growth into the unknown (not in the paper) -----------------------------------------------
+@njit(cache=True)
+def is_open_unknown(ref_flat, enclosed, idx):
+    """Unknown in M and outside the enclosed regions: space M never saw, where the map grows
+    (an enclosed region is an object's interior, which the last check closes)."""
+    v = ref_flat[idx]
+    return v != FREE and v != OCC and not bit_get(enclosed, idx)
+
+
+@njit(cache=True)
+def list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks, out):
+    """The hit cells of valid beams in open unknown space, each once (``hit_marks``), into
+    ``out``; their changed-flag marks are set too, so that no walk of the scan flags the cells
+    it hits (``clear_bits`` clears them after the walks). Returns the count."""
+    height, width = ref.shape
+    flat = ref.reshape(-1)
+    n = 0
+    for i in range(hits.shape[0]):
+        if verdict[i] == INVALID:
+            continue
+        row, col = int(np.floor(hits[i, 1])), int(np.floor(hits[i, 0]))
+        if not (0 <= row < height and 0 <= col < width):
+            continue
+        idx = row * width + col
+        if is_open_unknown(flat, enclosed, idx) and test_and_set(hit_marks, idx):
+            ch_marks[idx >> 3] = ch_marks[idx >> 3] | (1 << (idx & 7))
+            out[n] = idx
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def flag_open_unknown_walks(ref, enclosed, sensor, hits, reach, into_unknown, marks, cells,
+                            out, n):
+    """Changed flags, appended to ``out`` from position n, for the open unknown cells from the
+    sensor to ``reach[i]`` of the way to the hit of each beam i that looks into unknown space
+    (``into_unknown[i]``), all but the last; each cell once (``marks``). Returns the new
+    count."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for i in range(hits.shape[0]):
+        if not into_unknown[i] or not reach[i] > 0.0:
+            continue
+        count = walk(ref, sensor, hits[i], reach[i], True, cells)
+        for k in range(count):
+            idx = cells[0, k] * width + cells[1, k]
+            if is_open_unknown(flat, enclosed, idx) and test_and_set(marks, idx):
+                out[n] = idx
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def flag_listed_unchanged(cells, marks, out, n):
+    """Unchanged flags for ``cells``, appended to ``out`` from position n unless a cell has one
+    already (``marks``). Returns the new count."""
+    for k in range(cells.shape[0]):
+        if test_and_set(marks, cells[k]):
+            out[n] = cells[k]
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, hit_marks,
+              drawn):
+    """The hit buffers of open unknown cells, ``hitbuf = ((hitbuf << 1) | hit) & mask``: 1 for
+    each cell hit this scan, 0 for each seen through (its changed flag); then the ``drawn``
+    bit, hits in at least ``threshold`` of the last observations. Clears ``hit_marks``.
+    Returns the change of the number of drawn cells."""
+    delta = 0
+    n_changed = changed.shape[0]
+    for k in range(n_changed + hit_cells.shape[0]):
+        if k < n_changed:
+            idx, flag = changed[k], 0
+            if hitbuf[idx] == 0 or not is_open_unknown(ref_flat, enclosed, idx):
+                continue            # a 0 into an empty buffer: no change
+        else:
+            idx, flag = hit_cells[k - n_changed], 1
+            hit_marks[idx >> 3] = 0
+        hitbuf[idx] = ((hitbuf[idx] << 1) | flag) & mask
+        now = popcount16(hitbuf[idx]) >= threshold
+        if now != (bit_get(drawn, idx) == 1):
+            drawn[idx >> 3] = drawn[idx >> 3] ^ (1 << (idx & 7))
+            delta += 1 if now else -1
+    return delta
+
+
+@njit(cache=True)
+def decide_drawn(hitbuf, ref_flat, enclosed, mask, threshold, drawn):
+    """The ``drawn`` bits over the whole map (on loading a saved state). Returns the count."""
+    total = 0
+    for idx in range(ref_flat.shape[0]):
+        if hitbuf[idx] and popcount16(hitbuf[idx] & mask) >= threshold and \
+                is_open_unknown(ref_flat, enclosed, idx):
+            drawn[idx >> 3] = drawn[idx >> 3] | (1 << (idx & 7))
+            total += 1
+    return total
+
+
+@njit(cache=True)
+def apply_drawn(drawn, out):
+    """The drawn cells become occupied in ``out`` (flat)."""
+    for b in range(drawn.shape[0]):
+        if drawn[b] == 0:
+            continue
+        for idx in range(b * 8, min(b * 8 + 8, out.shape[0])):
+            if bit_get(drawn, idx):
+                out[idx] = OCC
 
 
 # --- buffers and decision ---------------------------------------------------------------------

@@ -85,6 +85,11 @@ class UpdaterConfig:
     fill_gaps_clearance: float = 0.05        # [m] free square around the hit cell, each way
     fill_gaps_free_margin: float = 0.075     # [m] free flags of agreeing beams this short of
                                              # the hit, with fill_gaps
+    # Not in the paper (steps.grow_into_unknown): the map grows into M's open unknown space
+    # (unknown, outside the enclosed regions): cells that beams looking into it see through
+    # become free by their changed flags, cells hit become occupied by hit buffers of N_b flags
+    # and the threshold T. Without it, a partly mapped place stays as unknown as M had it.
+    grow_into_unknown: bool = True
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -97,7 +102,8 @@ class UpdaterConfig:
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
 
     def __post_init__(self):
-        for name in ("gating", "neighbour_support", "last_check", "fill_gaps"):
+        for name in ("gating", "neighbour_support", "last_check", "fill_gaps",
+                     "grow_into_unknown"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")

@@ -10,7 +10,12 @@ buffers            2               uint16 shift registers of the last N_b flags
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan
+hit buffers        2               uint16 shift registers of hits in open unknown space
+drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
 =================  ==============  ==========================================================
+
+The last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
+it off the hit buffers and hit marks take no room).
 
 A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
 unique with the scan-mark bits (set when a cell is listed, cleared after the push), never by
@@ -123,6 +128,12 @@ class MapUpdater:
         self._ch_marks = np.zeros(n_bytes, np.uint8)
         self._un_marks = np.zeros(n_bytes, np.uint8)
         self._enclosed = np.zeros(n_bytes, np.uint8)
+        # growth into the unknown: hit buffers of open unknown cells, their drawn bits, marks
+        self._hitbuf = np.zeros(self._ref.shape if config.grow_into_unknown else (0, 0),
+                                np.uint16)
+        self._drawn = np.zeros(n_bytes, np.uint8)
+        self._hit_marks = np.zeros(n_bytes if config.grow_into_unknown else 0, np.uint8)
+        self._n_drawn = 0
         if config.last_check:
             max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
@@ -164,22 +175,41 @@ class MapUpdater:
         if steps.is_lost(beams, cfg, self._ref):
             self._counts["lost"] += 1
             return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
-        # the seen-surface guard and fill_gaps are not in the paper
+        n_ch, n_new, n_un = self._flag_push_decide(beams)
+        if cfg.gating:
+            self._gate.mark_processed(t, gate_pose)
+        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
+                          new_obstacle_flags=n_new, unchanged_flags=n_un,
+                          changed_cells=self._n_changed + self._n_drawn, **report)
+
+    def _flag_push_decide(self, beams) -> tuple[int, int, int]:
+        """Steps 2-3 and the buffers for a scan past the lost check: (changed flags,
+        new-obstacle flags, unchanged flags)."""
+        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
+        grow = cfg.grow_into_unknown
+        # the seen-surface guard, fill_gaps and the growth into the unknown are not in the paper
         guarded = steps.guard_seen_surfaces(ref, beams, cfg, res, self._ch_marks,
                                             self._enclosed, ws)
+        n_hits = steps.list_unknown_hits(ref, beams, self._enclosed, self._hit_marks,
+                                         self._ch_marks, ws) if grow else 0
         n_ch, n_new = steps.flag_changed_cells(ref, beams, self._ch_marks, ws)
+        if grow:
+            n_ch = steps.flag_unknown_seen_through(ref, beams, self._enclosed, cfg, res,
+                                                   self._ch_marks, ws, n_ch)
         steps.release_seen_surfaces(self._ch_marks, guarded, ws)
         n_ch, n_gaps = steps.fill_gaps(ref, beams, cfg, res, self._ch_marks, ws, n_ch)
         n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        if grow:
+            n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
         hist = self._hist.reshape(-1)
         n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks, ws)
         self._n_changed += steps.decide(hist, ref.reshape(-1), self._decided, n_moved,
                                         ref.shape[1], cfg, ws)
-        if cfg.gating:
-            self._gate.mark_processed(t, gate_pose)
-        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
-                          new_obstacle_flags=n_new + n_gaps, unchanged_flags=n_un,
-                          changed_cells=self._n_changed, **report)
+        if grow:
+            self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
+                                             n_hits, n_ch, cfg, self._hit_marks, self._drawn,
+                                             ws)
+        return n_ch, n_new + n_gaps, n_un
 
     def _sensor_for_scan(self, sensor_pose: Pose2D, pose_check):
         """(sensor (gx, gy, yaw), None, "") for a scan to process: the given pose, or the one the
@@ -236,13 +266,20 @@ class MapUpdater:
     def updated_map(self) -> OccupancyGrid:
         """M with the changed cells flipped and the last check applied (O(map); on demand)."""
         cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
-                                        self.config.last_check)
+                                        self.config.last_check, self._drawn)
         return OccupancyGrid(cells, self._res, self._origin)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the cells the decision rule marks changed, in row-major order.
-        Cells drawn by the last check are not among them (see ``updated_map``)."""
+        Cells drawn by the last check, and those of unknown space drawn by the growth into
+        it (``drawn_cells``), are not among them (see ``updated_map``)."""
         bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
+        return np.unravel_index(np.flatnonzero(bits), self._ref.shape)
+
+    def drawn_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the open unknown cells of M that the scans hit often enough to be
+        drawn occupied (``UpdaterConfig.grow_into_unknown``)."""
+        bits = np.unpackbits(self._drawn, bitorder="little")[:self._ref.size]
         return np.unravel_index(np.flatnonzero(bits), self._ref.shape)
 
     @property
@@ -261,7 +298,7 @@ class MapUpdater:
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
         arrays = (self._ref, self._hist, self._decided, self._ch_marks, self._un_marks,
-                  self._enclosed)
+                  self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
         return sum(a.nbytes for a in arrays) + self._ws.nbytes()
 
     # --- stop and resume ----------------------------------------------------------------------
@@ -274,11 +311,30 @@ class MapUpdater:
                 "gate": self._gate.state(), "counts": self._counts}
         buf = io.BytesIO()
         np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
-                            hist=self._hist)
+                            hist=self._hist, hits=self._hitbuf)
         try:
             write_atomically(path, buf.getvalue())
         except OSError as e:
             raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
+
+    def _restore_buffers(self, path, hist: np.ndarray, hits: np.ndarray | None) -> None:
+        """Take saved buffers (refused unless they fit the map and the configuration) and
+        decide every cell from them."""
+        mask = np.uint16(steps.buffer_mask(self.config))
+        for name, saved, into in (("buffers", hist, self._hist),
+                                  ("hit buffers", hits, self._hitbuf)):
+            if saved is None or (saved.size == 0 and into.size == 0):
+                continue
+            if saved.shape != into.shape or saved.dtype != np.uint16 or np.any(saved & ~mask):
+                raise UpdaterError(f"{path}: {name} do not fit the reference map and config")
+            into[...] = saved
+        ref = self._ref.reshape(-1)
+        self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1), ref,
+                                                          self._ref.shape[1], self.config)
+        if self.config.grow_into_unknown:
+            self._n_drawn = int(steps.kernels().decide_drawn(
+                self._hitbuf.reshape(-1), ref, self._enclosed, mask, self.config.threshold,
+                self._drawn))
 
     @classmethod
     def load(cls, path) -> MapUpdater:
@@ -291,6 +347,8 @@ class MapUpdater:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 ref, hist = z["reference"], z["hist"]
+                # states saved before the growth into the unknown have no hit buffers
+                hits = z["hits"] if "hits" in z.files else None
         except FileInputError as e:
             raise UpdaterError(str(e)) from None
         # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
@@ -312,12 +370,7 @@ class MapUpdater:
         except (GridError, TypeError, ValueError) as e:
             raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
         updater = cls(grid, config)
-        if hist.shape != ref.shape or hist.dtype != np.uint16 or \
-                np.any(hist & ~np.uint16(steps.buffer_mask(config))):
-            raise UpdaterError(f"{path}: buffers do not fit the reference map and config")
-        updater._hist[...] = hist
-        updater._decided, updater._n_changed = steps.decide_all(
-            updater._hist.reshape(-1), updater._ref.reshape(-1), ref.shape[1], config)
+        updater._restore_buffers(path, hist, hits)
         try:
             updater._gate.restore(meta["gate"])
         except (ValueError, TypeError) as e:

@@ -1,0 +1,146 @@
+"""Partly mapped places: a map that saw only part of the place, updated from scans that look
+into the part it did not see. Such scans are not dropped as lost for that, and the update grows
+the map into the unknown: of the formerly unknown cells the later scans observe at least 7
+times, at least 90 % get a known state (free, or occupied within a cell of an occupied cell)
+agreeing with a map of the whole place, and no occupied cell of the map is freed.
+
+Two places: the synthetic hall of tests/synthetic_hall.py with its top right bay unknown in the
+map and entered by the route; and the Intel Research Lab log (../shared/data) with a map from
+its first 40 % of scans, updated with the rest. Run with ``-s`` to print the figures.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from evaluation.scores import ObservationCounter
+from gridmap import FREE, OCCUPIED, UNKNOWN, load_map, save_map
+from gridmap.mapping import build_map
+from robotlogs.carmen import read_carmen
+from robotlogs.rosbag import write_bag
+from scenarios.replay import update_from_log
+
+try:
+    import synthetic_hall as hall
+    from test_intel import frame_around
+except ImportError:  # tests collected as a package
+    from tests import synthetic_hall as hall
+    from tests.test_intel import frame_around
+
+INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
+SEEN = 7           # observations that make a formerly unknown cell count
+MAX_RANGE = 18.0   # [m] the updater's
+
+
+def grow(mask: np.ndarray) -> np.ndarray:
+    p = np.pad(mask, 1)
+    out = mask.copy()
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            out |= p[1 + dr:p.shape[0] - 1 + dr, 1 + dc:p.shape[1] - 1 + dc]
+    return out
+
+
+def observed(frame, placed) -> np.ndarray:
+    """Per cell, how many of the scans (scan, sensor pose) hit it or see through it with a
+    valid beam within the updater's range."""
+    counter = ObservationCounter(frame, max_range=MAX_RANGE)
+    for scan, sensor in placed:
+        r = scan.ranges.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r >= scan.range_min) & (r < min(scan.range_max, MAX_RANGE))
+        counter.add_scan(sensor, np.where(valid, r, 0.0), scan.angles())
+    return counter.counts
+
+
+def grown(before, after, whole, counts) -> dict:
+    """How the update grew ``before`` into ``after`` against ``whole`` (a map of all of it)."""
+    unknown = (before.data == UNKNOWN) & (counts >= SEEN) & (whole.data != UNKNOWN)
+    out = after.data[unknown]
+    right_free = (out == FREE) & (whole.data[unknown] == FREE)
+    right_occupied = (out == OCCUPIED) & grow(whole.data == OCCUPIED)[unknown]
+    occupied = before.data == OCCUPIED
+    return {"cells": int(unknown.sum()), "known": float((out != UNKNOWN).mean()),
+            "agreeing": float((right_free | right_occupied).mean()),
+            "freed": int((occupied & (after.data == FREE)).sum()),
+            "freed_also_in_whole": int((occupied & (whole.data == OCCUPIED)
+                                        & (after.data == FREE)).sum())}
+
+
+def report(name, s, g):
+    print(f"\n{name}: {s['scans_used']} scans, {s['scans_processed']} processed, "
+          f"{s['scans_dropped_as_lost']} dropped as lost; {g['cells']} formerly unknown cells "
+          f"observed {SEEN}+ times: {g['known']:.3f} known, {g['agreeing']:.3f} agreeing with "
+          f"the whole map; occupied cells of the map freed {g['freed']} "
+          f"({g['freed_also_in_whole']} occupied in the whole map too)")
+
+
+# --- the synthetic hall, its top right bay unknown -----------------------------------------------
+BAY = (12.4, 6.2)     # [m] the bay: x above and y above these, walls included
+
+
+@pytest.fixture(scope="module")
+def bay(tmp_path_factory):
+    d = tmp_path_factory.mktemp("bay")
+    steps = hall.record(seed=2, jitter=(0.0, 0.0))
+    whole = hall.rasterise(hall.after())
+    x, y = hall.frame()
+    cells = whole.data.copy()
+    cells[(x > BAY[0]) & (y > BAY[1])] = UNKNOWN
+    before = whole.with_data(cells)
+    save_map(before, d / "bay.yaml")
+    write_bag(d / "bay.bag", hall.bag_records(steps), "ros1")
+    s = update_from_log(d / "bay.yaml", d / "bay.bag", d / "grown.yaml", progress=False)
+    placed = [(scan, true.compose(hall.MOUNT)) for _, true, _, _, scan in hall.gated(steps)]
+    g = grown(before, load_map(d / "grown.yaml"), whole, observed(before, placed))
+    report("hall with an unknown bay", s, g)
+    return s, g
+
+
+def test_scans_into_the_unknown_bay_are_not_dropped_as_lost(bay):
+    s, _ = bay
+    assert s["scans_processed"] > 100 and s["scans_dropped_as_lost"] == 0
+
+
+def test_the_map_grows_into_the_bay_and_frees_nothing_it_had(bay):
+    _, g = bay
+    assert g["cells"] > 1000
+    assert g["known"] >= 0.9 and g["agreeing"] >= 0.9
+    assert g["freed"] == 0
+
+
+# --- the Intel lab: a map from the first 40 % of the scans ---------------------------------------
+@pytest.fixture(scope="module")
+def intel(tmp_path_factory):
+    if not INTEL.exists():
+        pytest.skip(f"the Intel lab log is not at {INTEL} (see data/README)")
+    d = tmp_path_factory.mktemp("intel40")
+    scans = read_carmen(INTEL, strict=True).scans()
+    cut = int(0.4 * len(scans))
+    frame = frame_around(scans, 0.05)
+    before = build_map(frame, [(r.scan, r.laser_pose) for r in scans[:cut]])
+    whole = build_map(frame, [(r.scan, r.laser_pose) for r in scans])
+    save_map(before, d / "first40.yaml")
+    s = update_from_log(d / "first40.yaml", INTEL, d / "grown.yaml", progress=False,
+                        start_time=scans[cut].time)
+    # the scans the updater's gate lets through (its odometry: the log's odom_* poses)
+    later = [(r.time, None, r.odom_pose, r.laser_pose, r.scan) for r in scans[cut:]]
+    placed = [(scan, pose) for _, _, _, pose, scan in hall.gated(later)]
+    g = grown(before, load_map(d / "grown.yaml"), whole, observed(before, placed))
+    report("Intel lab, map of the first 40 %", s, g)
+    return s, g
+
+
+def test_intel_scans_into_the_unknown_are_not_dropped_as_lost(intel):
+    s, _ = intel
+    assert s["scans_processed"] > 200 and s["scans_dropped_as_lost"] == 0
+
+
+def test_intel_map_grows_into_the_unknown_and_keeps_what_both_maps_have(intel):
+    _, g = intel
+    assert g["cells"] > 5000
+    assert g["known"] >= 0.9 and g["agreeing"] >= 0.9
+    assert g["freed_also_in_whole"] == 0

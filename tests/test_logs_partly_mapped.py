@@ -22,6 +22,7 @@ from gridmap.mapping import build_map
 from robotlogs.carmen import read_carmen
 from robotlogs.rosbag import write_bag
 from scenarios.replay import update_from_log
+from updater import UpdaterConfig
 
 try:
     import synthetic_hall as hall
@@ -33,6 +34,7 @@ except ImportError:  # tests collected as a package
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 SEEN = 7           # observations that make a formerly unknown cell count
 MAX_RANGE = 18.0   # [m] the updater's
+GROW = UpdaterConfig(grow_into_unknown=True)    # off by default (README, "Choices")
 
 
 def grow(mask: np.ndarray) -> np.ndarray:
@@ -93,7 +95,8 @@ def bay(tmp_path_factory):
     before = whole.with_data(cells)
     save_map(before, d / "bay.yaml")
     write_bag(d / "bay.bag", hall.bag_records(steps), "ros1")
-    s = update_from_log(d / "bay.yaml", d / "bay.bag", d / "grown.yaml", progress=False)
+    s = update_from_log(d / "bay.yaml", d / "bay.bag", d / "grown.yaml", progress=False,
+                        updater_config=GROW)
     placed = [(scan, true.compose(hall.MOUNT)) for _, true, _, _, scan in hall.gated(steps)]
     g = grown(before, load_map(d / "grown.yaml"), whole, observed(before, placed))
     report("hall with an unknown bay", s, g)
@@ -125,7 +128,7 @@ def intel(tmp_path_factory):
     whole = build_map(frame, [(r.scan, r.laser_pose) for r in scans])
     save_map(before, d / "first40.yaml")
     s = update_from_log(d / "first40.yaml", INTEL, d / "grown.yaml", progress=False,
-                        start_time=scans[cut].time)
+                        start_time=scans[cut].time, updater_config=GROW)
     # the scans the updater's gate lets through (its odometry: the log's odom_* poses)
     later = [(r.time, None, r.odom_pose, r.laser_pose, r.scan) for r in scans[cut:]]
     placed = [(scan, pose) for _, _, _, pose, scan in hall.gated(later)]

@@ -66,7 +66,7 @@ def _drive_into_the_unknown(config):
 def test_the_map_grows_into_the_unknown_part_by_the_same_buffers():
     """Seen through, the unknown part becomes free; hit, its walls are drawn (T of N_b hits);
     with ``grow_into_unknown`` off it stays unknown apart from what detected changes free."""
-    walls, ref, updater = _drive_into_the_unknown(UpdaterConfig())
+    walls, ref, updater = _drive_into_the_unknown(UpdaterConfig(grow_into_unknown=True))
     out = updater.updated_map().data
     unknown = ref.data == UNKNOWN
     inside = world.cells_of(world.Rect(4.5, 1.0, 10.0, 10.0))
@@ -83,7 +83,7 @@ def test_the_map_grows_into_the_unknown_part_by_the_same_buffers():
 
 
 def test_hit_buffers_are_saved_and_loaded_with_the_state(tmp_path):
-    _, _, updater = _drive_into_the_unknown(UpdaterConfig())
+    _, _, updater = _drive_into_the_unknown(UpdaterConfig(grow_into_unknown=True))
     updater.save(tmp_path / "s.npz")
     loaded = MapUpdater.load(tmp_path / "s.npz")
     assert np.array_equal(loaded.updated_map().data, updater.updated_map().data)

@@ -232,7 +232,7 @@ def test_last_check_draws_no_wall_along_unknown_that_reaches_the_map_border():
         Rect(10.5, 0.35, 10.65, 4.5125), Rect(10.5, 6.5125, 10.65, 10.65),
         Rect(10.9, 0.35, 10.95, 10.65)]
     ref = world.rasterise(walls)
-    updater, _, _ = drive(ref, world_walls)
+    updater, _, _ = drive(ref, world_walls, UpdaterConfig(grow_into_unknown=True))
     out = updater.updated_map().data
     door = world.cells_of(east) & (ref.data == OCCUPIED)
     assert (out[door] == FREE).mean() > 0.5         # the door is seen open

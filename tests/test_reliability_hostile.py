@@ -437,3 +437,34 @@ def test_a_laserscan_of_one_range_and_no_increment_is_skipped_and_counted(tmp_pa
     out = capsys.readouterr().out
     assert "5 of" in out or "of 5 scans" in out or "skipped" in out, out
     assert load_map(tmp_path / "o.yaml").shape == reference_grid().shape
+
+
+@pytest.mark.filterwarnings("ignore:.*did not finish its route")
+def test_a_run_with_bags_killed_mid_session_resumes_and_rewrites_its_unfinished_bag(tmp_path):
+    from robotlogs.rosbag import bag_topics
+    from scenarios.observers import Observers
+    from scenarios.runner import RunOptions, run_scenario
+    from scenarios.session_bags import SessionBagRecorder
+    from tiny_room import write_tiny_room
+
+    class Killed(BaseException):
+        """Stands for SIGKILL: nothing after it runs."""
+
+    class DiesInW2(SessionBagRecorder):
+        def scan(self, msg, *args):
+            super().scan(msg, *args)
+            if msg.time > 5.0:
+                raise Killed
+
+    path = write_tiny_room(tmp_path / "room.yaml", max_duration=20.0)
+    bags, run = tmp_path / "bags", tmp_path / "run"
+    with pytest.raises(Killed):
+        run_scenario(path, RunOptions(out=run, sessions=2, progress=False,
+                                      observer=Observers(DiesInW2(bags))))
+    assert not (bags / "W2.bag").exists() and (bags / ".partial-W2.bag").exists()
+    recorder = SessionBagRecorder(bags)
+    with time_limit(LIMIT_S * 3):
+        run_scenario(None, RunOptions(out=run, resume=True, progress=False,
+                                      observer=Observers(recorder)))
+    assert recorder.paths["W2"] == bags / "W2.bag" and not (bags / ".partial-W2.bag").exists()
+    assert bag_topics(bags / "W2.bag")["/scan"] == "sensor_msgs/msg/LaserScan"

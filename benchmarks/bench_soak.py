@@ -58,7 +58,6 @@ MOVES = (1, 3)           # objects moved per session, at least and at most
 # against 1.19 m, sessions above 0.3 m 1 against 8 (seed 2025: 1 against 3). 0: no margin.
 LANE_MARGIN = 0.3
 SEEN_HITS = 30           # beams from the route that must end on an object for it to count as seen
-ROUTE_STEP = 0.5         # [m] between the poses the route is looked at from
 
 
 @dataclass
@@ -85,16 +84,10 @@ class SessionRow:
 
 # --- the rearrangements -------------------------------------------------------------------------
 def _route_poses(scn, route) -> np.ndarray:
-    """Robot poses (N, 3) every ROUTE_STEP metres along the route, facing along each leg."""
-    pts = np.vstack([[scn.robot.start.x, scn.robot.start.y], np.asarray(route, float)])
-    out = []
-    for a, b in zip(pts[:-1], pts[1:]):
-        length = float(np.hypot(*(b - a)))
-        yaw = math.atan2(b[1] - a[1], b[0] - a[0])
-        for s in np.arange(0.0, length, ROUTE_STEP):
-            p = a + (b - a) * s / max(length, 1e-9)
-            out.append((p[0], p[1], yaw))
-    return np.array(out)
+    """Robot poses (N, 3) every 0.5 m along the route, facing along each leg."""
+    from scenarios.generator import route_poses
+
+    return route_poses([scn.robot.start.x, scn.robot.start.y], route)
 
 
 def seen_objects(scn, session: int) -> list[str]:

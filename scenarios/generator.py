@@ -184,18 +184,9 @@ def _fits(o, layout: Layout, others) -> bool:
             geo.segment_box_distance(a, b, o.box()[None])
         if float(d[0]) < clear:
             return False
-    return not any(_overlap(grown, q) for q in others if q.id != o.id)
+    from sim.validate import objects_overlap
 
-
-def _overlap(a, b) -> bool:
-    from sim import geometry as geo
-
-    if a.is_circle and b.is_circle:
-        return geo.circles_overlap(a.circle(), b.circle())
-    if a.is_circle or b.is_circle:
-        c, box = (a, b) if a.is_circle else (b, a)
-        return geo.box_circle_overlap(box.box(), c.circle())
-    return geo.boxes_overlap(a.box(), b.box())
+    return not any(objects_overlap(grown, q) for q in others if q.id != o.id)
 
 
 def _new_object(rng, oid_kind: tuple[str, str], area) -> sim.Obstacle:
@@ -255,7 +246,7 @@ def _transport(rng, layout: Layout):
     return _serpentine(layout, chosen), quick
 
 
-def _route_poses(start, route) -> np.ndarray:
+def route_poses(start, route) -> np.ndarray:
     """Robot poses (N, 3) every ROUTE_STEP metres along the route, facing along each leg."""
     pts = np.vstack([start, np.asarray(route, float)])
     out = []
@@ -503,7 +494,7 @@ def generate(seed: int, size=(30.0, 20.0), sessions: int = 4, fov: int = 270) ->
     for i in range(1, sessions):
         route, quick = _transport(rng, layout)
         # the quick route first: it is the shorter, so a place it misses is given up sooner
-        views = tuple(_route_poses(layout.start, r) for r in (quick, route))
+        views = tuple(route_poses(layout.start, r) for r in (quick, route))
         state = _Session(layout, movable, views, _view_area(layout, quick))
         entry = {"name": f"W{i + 1}", "changes": _changes(rng, state, counters),
                  "people": _people(rng, layout)}

@@ -131,7 +131,7 @@ def _check_objects(scn, objs, keys, fail: Fail, where: str) -> None:
         near = np.nonzero((ext[a + 1:, 0] < ext[a, 2]) & (ext[a + 1:, 2] > ext[a, 0])
                           & (ext[a + 1:, 1] < ext[a, 3]) & (ext[a + 1:, 3] > ext[a, 1]))[0]
         for b in near + a + 1:
-            if _overlap(objs[a], objs[b]):
+            if objects_overlap(objs[a], objs[b]):
                 fail(keys[objs[b].id], f"object {objs[b].id!r} overlaps object {objs[a].id!r} "
                                        f"in {where}")
 
@@ -201,7 +201,8 @@ def _extent(o) -> np.ndarray:
     return geo.box_extent(o.box()[None])[0]
 
 
-def _overlap(a, b) -> bool:
+def objects_overlap(a, b) -> bool:
+    """Whether two scenario objects (boxes or circles) share area."""
     if a.is_circle and b.is_circle:
         return geo.circles_overlap(a.circle(), b.circle())
     if a.is_circle or b.is_circle:

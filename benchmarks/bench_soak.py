@@ -79,6 +79,8 @@ class SessionRow:
     opdf: float          # [%] OPDF(M_i, G_i)
     opdf_oracle: float   # [%] OPDF(oracle_i, G_i)
     ape_rmse: float      # [m] of the localiser on M_{i-1}
+    ghosts: int = 0      # occupied cells of M_i far from G_i's that a person covered
+    g_freed: int = 0     # cells occupied in G_i that the session freed
 
 
 # --- the rearrangements -------------------------------------------------------------------------
@@ -246,7 +248,7 @@ class PeakMemory:
 
 
 def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = True,
-             updater_config=None) -> list[SessionRow]:
+             updater_config=None, method: str = "paper") -> list[SessionRow]:
     """Play W1 then every update session, chaining the maps; one row per update session."""
     from gridmap import FREE, OCCUPIED
     import evaluation as ev
@@ -259,7 +261,7 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = Tr
     last_targets = np.zeros(m1.shape, bool)
     last_truth = None
     options = runner.RunOptions(progress=False, pose_check=pose_check,
-                                updater_config=updater_config)
+                                updater_config=updater_config, method=method)
     rows = []
     for i in range(1, len(scn.sessions)):
         t0 = time.perf_counter()
@@ -283,7 +285,9 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = Tr
                                n_new, int((fixed & new).sum()) / n_new if n_new else None,
                                cd["changes"],
                                mm["updated_vs_truth"]["opdf"], mm["oracle_vs_truth"]["opdf"],
-                               m["localization"]["previous_map"]["rmse"]))
+                               m["localization"]["previous_map"]["rmse"], m["ghost_cells"],
+                               int(((res.truth.data == OCCUPIED) & (res.updated.data == FREE)
+                                    & (previous.data != FREE)).sum())))
         previous = res.updated
         last_targets = targets
         last_truth = res.truth
@@ -346,11 +350,16 @@ def main(argv=None) -> int:
     ap.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=True,
                     help="the runner's pose check (default on, as in the runner)")
     ap.add_argument("--fill-gaps", action="store_true", help="the updater's fill_gaps on")
+    ap.add_argument("--method", default="paper",
+                    help="what updates the map (scenarios.methods: paper, none, remap, fuse)")
     ap.add_argument("--lane-margin", type=float, default=LANE_MARGIN,
                     help=f"[m] clear space beside the robot's path, beyond its radius, that "
                          f"moved objects keep (default {LANE_MARGIN}; 0: the scenario checks "
                          f"only)")
     args = ap.parse_args(argv)
+    from scenarios.methods import check_method
+
+    check_method(args.method, "--method")      # before minutes of generation
     t0 = time.perf_counter()
     scn, moved = soak_scenario(args.sessions, args.seed, args.lane_margin)
     print(f"{args.sessions} sessions generated in {time.perf_counter() - t0:.0f} s",
@@ -358,7 +367,8 @@ def main(argv=None) -> int:
     from updater import UpdaterConfig
 
     rows = run_soak(scn, moved, pose_check=args.pose_check,
-                    updater_config=UpdaterConfig(fill_gaps=args.fill_gaps))
+                    updater_config=UpdaterConfig(fill_gaps=args.fill_gaps),
+                    method=args.method)
     print_table(rows)
     v = verdict(rows)
     prec = [r.precision for r in rows[1:] if r.precision is not None]

@@ -11,11 +11,12 @@ import sys
 from .catalog import DEFAULT_SCENARIO, ScenarioNotFound, builtin_scenarios, find_scenario
 
 _LAZY = {"evaluate": "gym.policies", "EvaluationTable": "gym.policies",
-         "RouteFollowingPolicy": "gym.policies", "WarehouseMapUpdateEnv": "gym.env"}
+         "RouteFollowingPolicy": "gym.policies", "WarehouseMapUpdateEnv": "gym.env",
+         "generate": "generator", "write_generated": "generator"}
 
 
 def __getattr__(name):
-    # the gymnasium side is loaded on first use only
+    # the gymnasium side (and the generator) is loaded on first use only
     if name in _LAZY:
         import importlib
 
@@ -59,4 +60,5 @@ def _register_env() -> None:
 _register_env()
 
 __all__ = ["DEFAULT_SCENARIO", "ScenarioNotFound", "builtin_scenarios", "find_scenario",
-           "evaluate", "EvaluationTable", "RouteFollowingPolicy", "WarehouseMapUpdateEnv"]
+           "evaluate", "EvaluationTable", "RouteFollowingPolicy", "WarehouseMapUpdateEnv",
+           "generate", "write_generated"]

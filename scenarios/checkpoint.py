@@ -151,6 +151,7 @@ def write_manifest(out_dir, scenario_path: Path, seed: int, options) -> None:
         "sessions": options.sessions,
         "quick": bool(options.quick),
         "pose_check": bool(options.pose_check),
+        "method": options.method,
         "updater_config": _config_dict(options.updater_config),
         "localizer_config": _config_dict(options.localizer_config),
         "pose_check_config": _config_dict(options.pose_check_config),
@@ -182,7 +183,8 @@ def resume_options(scenario, options):
         raise ResumeError(f"{path}: the scenario file {scenario_file} changed or vanished since "
                           "the run started; start a new run")
     default = RunOptions()
-    recorded = {"seed": m["seed"], "quick": m["quick"], "pose_check": m["pose_check"]}
+    recorded = {"seed": m["seed"], "quick": m["quick"], "pose_check": m["pose_check"],
+                "method": m.get("method", "paper")}     # runs recorded before methods: paper
     for key, value in recorded.items():
         given = getattr(options, key)
         if given is not None and given != getattr(default, key) and given != value:

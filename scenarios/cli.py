@@ -47,10 +47,12 @@ def _cmd_render(args) -> int:
 def _cmd_run(args) -> int:
     from .checkpoint import ResumeError
     from .observers import Observers
+    from .methods import check_method
     from .robot_config import load_robot_config
     from .runner import RunOptions, run_scenario
 
     config = load_robot_config(args.config)     # refused before anything is written
+    check_method(args.method, "--method")
     if args.resume is not None and args.out is not None and args.out != args.resume:
         raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
     observers = []
@@ -67,7 +69,7 @@ def _cmd_run(args) -> int:
                       updater_config=config.updater, localizer_config=config.localizer,
                       pose_check_config=config.pose_check,
                       observer=Observers(*observers) if observers else None,
-                      resume=args.resume is not None, **given)
+                      resume=args.resume is not None, method=args.method, **given)
     try:
         result = run_scenario(args.scenario, opts)
     finally:
@@ -147,6 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_map(sub)
     _add_render(sub)
     _add_ros1(sub)
+    _add_generate(sub)
+    _add_sweep(sub)
     return p
 
 
@@ -172,6 +176,10 @@ def _add_run(sub) -> None:
     run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map or the localiser's "
                           "covariance calls unsure (default: on)")
+    run.add_argument("--method", default="paper", metavar="NAME",
+                     help="what updates the map: paper (the updater, default), none (keep "
+                          "M(i-1)), remap (a fresh log-odds map of the session), fuse "
+                          "(log-odds mapping on M(i-1) as the prior)")
     run.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",
@@ -272,6 +280,61 @@ def _add_render(sub) -> None:
     ren.add_argument("--seed", type=int, default=None,
                      help="seed of the world, which places the people (default: the scenario's)")
     ren.set_defaults(func=_cmd_render)
+
+
+def _cmd_generate(args) -> int:
+    from .generator import write_generated
+
+    path = write_generated(args.seed, args.out, size=tuple(args.size), sessions=args.sessions,
+                           fov=args.fov)
+    print(f"wrote {path}")
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    from .study_report import summarise
+    from .sweep import SweepError, run_sweep
+
+    if args.summarise is not None:
+        table = summarise(args.summarise)
+        print(f"wrote {args.summarise}/results.csv, summary.md and figures ({table} runs)")
+        return 0
+    if args.spec is None or args.out is None:
+        raise SweepError("mapupdate sweep needs SPEC.yaml and --out DIR "
+                              "(or --summarise DIR)")
+    done = run_sweep(args.spec, args.out, workers=args.workers, ray=args.ray,
+                     progress=not args.no_progress)
+    print(f"wrote {args.out}/results.csv and summary.md ({done} runs)")
+    return 0
+
+
+def _add_generate(sub) -> None:
+    gen = sub.add_parser("generate", help="write a generated warehouse scenario")
+    gen.add_argument("--seed", type=int, required=True, help="layout seed")
+    gen.add_argument("--out", type=Path, required=True, help="scenario YAML to write")
+    gen.add_argument("--size", type=float, nargs=2, default=[30.0, 20.0], metavar=("W", "H"),
+                     help="inner size of the building [m], 15 x 10 to 60 x 40 (default 30 20)")
+    gen.add_argument("--sessions", type=int, default=4,
+                     help="sessions, the mapping session W1 included (default 4)")
+    gen.add_argument("--fov", type=int, default=270, help="lidar field of view, 270 or 360")
+    gen.set_defaults(func=_cmd_generate)
+
+
+def _add_sweep(sub) -> None:
+    sw = sub.add_parser("sweep", help="run a study: scenarios x seeds x methods x grid")
+    sw.add_argument("spec", nargs="?", type=Path, default=None, help="the study's YAML spec")
+    sw.add_argument("--out", type=Path, default=None, help="study folder")
+    sw.add_argument("--workers", type=int, default=None,
+                    help="processes of the local pool (default: the number of CPUs)")
+    sw.add_argument("--ray", default=None, metavar="auto|ADDRESS",
+                    help="run the runs as Ray tasks: 'auto' starts a local Ray, an address "
+                         "joins a cluster (needs the extra: pip install "
+                         "'lidar-map-updating[ray]')")
+    sw.add_argument("--summarise", type=Path, default=None, metavar="DIR",
+                    help="rebuild results.csv, summary.md and figures of DIR from its "
+                         "finished runs")
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_cmd_sweep)
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:

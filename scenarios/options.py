@@ -35,6 +35,7 @@ class RunOptions:
     pose_check: bool = True
     pose_check_config: object | None = None   # a localization.confidence.PoseCheckConfig
     resume: bool = False       # continue the run in ``out`` after its last finished session
+    method: str = "paper"      # what updates the map: one of scenarios.methods.METHODS
 
 
 class SessionObserver(Protocol):

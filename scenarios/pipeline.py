@@ -55,8 +55,9 @@ class RobotPipeline:
     """Localiser (optional), pose check (optional), mount and updater (optional) of one robot
     on one reference map.
 
-    ``updater``: an ``updater.MapUpdater`` (None: localisation only, as the runner's second
-    localiser on M1). ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
+    ``updater``: an ``updater.MapUpdater``, or any method with its interface (``process``,
+    ``updated_map``, ``state_bytes``: the baselines of ``scenarios.methods``); None:
+    localisation only, as the runner's second localiser on M1. ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
     ``tracking``: a ``localization.tracking.TrackingMonitor``, judging the localiser after each

@@ -54,11 +54,18 @@ def machine_summary() -> str:
     return f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
+def _method_note(metrics: dict) -> str:
+    # the paper's updater is the default: its reports read as they always did
+    method = metrics.get("method", "paper")
+    return "" if method == "paper" else f", method {method}"
+
+
 def render_report(metrics: dict) -> str:
     """report.md: the paper's Tables I and II and the project's own tables."""
     sessions = [s for s in metrics["sessions"] if "change_detection" in s]
     out = [f"# Map updating on `{metrics['scenario']}`", "",
-           f"Seed {metrics['seed']}{', quick routes' if metrics.get('quick') else ''}; "
+           f"Seed {metrics['seed']}{', quick routes' if metrics.get('quick') else ''}"
+           f"{_method_note(metrics)}; "
            f"wall time {metrics['wall_time_s']:.1f} s on {machine_summary()}.", ""]
     first = metrics["sessions"][0]
     if "initial_vs_truth" in first.get("map_metrics", {}):

@@ -99,7 +99,8 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     world = sim.World(scenario, session, seeds["world"])
     us = UpdateSession(scenario, session, world, previous, initial, seeds["localizer"],
                        options.updater_config, options.localizer_config,
-                       pose_check=options.pose_check, pose_check_config=options.pose_check_config)
+                       pose_check=options.pose_check, pose_check_config=options.pose_check_config,
+                       method=options.method)
     observer = options.observer
     if observer is not None:
         observer.session_start(scenario, session, world, previous, initial, us.updater,
@@ -213,7 +214,7 @@ def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions
             bar.update(1)
 
     metrics = {
-        "scenario": scn.name, "seed": seed, "quick": options.quick,
+        "scenario": scn.name, "seed": seed, "quick": options.quick, "method": options.method,
         "sessions": [r.metrics for r in results],
         "wall_time_s": wall_before + time.perf_counter() - wall0,
     }

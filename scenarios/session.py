@@ -108,16 +108,19 @@ class UpdateSession:
     ``localizer_seed``: both localisers use it, as the evaluation asks. ``localizer_config``:
     by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas). ``pose_check``: the
     safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
+    ``method``: what updates the map, a name of ``scenarios.methods.METHODS`` (default the
+    paper's updater); ``self.updater`` is that method.
     """
 
     def __init__(self, scenario, session: int, world, reference: OccupancyGrid,
                  initial: OccupancyGrid, localizer_seed, updater_config=None,
-                 localizer_config=None, pose_check: bool = True, pose_check_config=None):
+                 localizer_config=None, pose_check: bool = True, pose_check_config=None,
+                 method: str = "paper"):
         import sim
         from localization import MonteCarloLocalizer
         from localization.confidence import PoseCheck
-        from updater import MapUpdater
 
+        from .methods import make_method
         from .pipeline import RobotPipeline
 
         self.scenario, self.index, self.world = scenario, session, world
@@ -136,7 +139,7 @@ class UpdateSession:
             localizer_config = localizer_config_for(scenario)
         self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
         self.localizer.initialize(start, cov)
-        self.updater = MapUpdater(reference, updater_config)
+        self.updater = make_method(method, reference, updater_config)
         guard = PoseCheck(reference, pose_check_config) if pose_check else None
         self.pipeline = RobotPipeline(self.updater, self.localizer, guard)
         # the comparison of the evaluation: the same localiser on M1, feeding no updater

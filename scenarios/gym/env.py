@@ -109,6 +109,9 @@ class WarehouseMapUpdateEnv(gym.Env):
     * ``updater_config``, ``localizer_config``: as for the runner (not beside the same section
       of ``config``); ``pose_check`` (on): whether the pose check runs.
     * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
+    * ``method``: what updates the map, as ``mapupdate run --method``: ``paper`` (the
+      updater, default), ``none``, ``remap`` or ``fuse`` (``scenarios.methods``); an unknown
+      name is refused (``MethodError``) with the nearest valid one.
 
     ## Version History
 
@@ -131,12 +134,15 @@ class WarehouseMapUpdateEnv(gym.Env):
                  map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
                  waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
                  updater_config=None, localizer_config=None, pose_check: bool = True,
-                 config=None, render_mode: str | None = None, render_scale: int = 2):
+                 config=None, render_mode: str | None = None, render_scale: int = 2,
+                 method: str = "paper"):
         import sim
 
+        from ..methods import check_method
         from ..robot_config import load_robot_config
 
         robot = load_robot_config(config, source="config")
+        self.method = check_method(method, "method")
         self.scenario = _load_scenario(scenario, quick)
         self.session_index = self.scenario.session_index(session)
         if self.scenario.sessions[self.session_index].mapping:
@@ -212,7 +218,8 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.session = UpdateSession(scn, i, self.world, reference, initial,
                                      seeds[i]["localizer"], self._updater_config,
                                      self._localizer_config, pose_check=self._pose_check,
-                                     pose_check_config=self._pose_check_config)
+                                     pose_check_config=self._pose_check_config,
+                                     method=self.method)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
         self._next_waypoint = 0

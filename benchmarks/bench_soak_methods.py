@@ -1,0 +1,90 @@
+"""The 50-session soak (``bench_soak.py``) for each method, side by side: the same random
+rearrangements, people and seeds, the map updated by the paper's method or by a baseline
+(``scenarios.methods``), each chaining its own maps from session to session.
+
+Per method, over the sessions after the first: precision and recall (mean and least-squares
+trend per session), recall on the targets the session's own moves made, target cells, ghosts,
+cells occupied in the truth that a session freed, OPDF of M(i) and of the oracle, and the time
+per session. No bars: this compares, it does not judge.
+
+    python benchmarks/bench_soak_methods.py [--sessions N] [--seed S] [--methods paper,fuse,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import bench_soak  # noqa: E402  (beside this file)
+
+
+def _mean(values) -> float:
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def summary(rows) -> dict:
+    rest = rows[1:] if len(rows) > 1 else rows
+    k = max(1, len(rest) // 5)
+    return {
+        "precision": _mean(r.precision for r in rest),
+        "precision_trend": bench_soak.trend([r.precision for r in rest]),
+        "recall": _mean(r.recall for r in rest),
+        "recall_trend": bench_soak.trend([r.recall for r in rest]),
+        "recall_first": _mean(r.recall for r in rest[:k]),
+        "recall_last": _mean(r.recall for r in rest[-k:]),
+        "recall_new": _mean(r.recall_new for r in rest),
+        "recall_new_trend": bench_soak.trend([r.recall_new for r in rest]),
+        "targets": _mean(r.targets for r in rest),
+        "ghosts": sum(r.ghosts for r in rest), "ghosts_max": max(r.ghosts for r in rest),
+        "g_freed": sum(r.g_freed for r in rest),
+        "opdf": _mean(r.opdf for r in rest), "opdf_last": _mean(r.opdf for r in rest[-k:]),
+        "opdf_oracle": _mean(r.opdf_oracle for r in rest),
+        "wall_s": _mean(r.wall_s for r in rest)}
+
+
+ROWS = [("precision (trend per session)", "{precision:.3f} ({precision_trend:+.4f})"),
+        ("recall on all targets (trend)", "{recall:.3f} ({recall_trend:+.4f})"),
+        ("recall, first / last fifth", "{recall_first:.3f} / {recall_last:.3f}"),
+        ("recall on new targets (trend)", "{recall_new:.3f} ({recall_new_trend:+.4f})"),
+        ("target cells per session", "{targets:.0f}"),
+        ("ghost cells, all sessions (most in one)", "{ghosts} ({ghosts_max})"),
+        ("G-occupied cells freed, all sessions", "{g_freed}"),
+        ("OPDF M(i) %, mean / last fifth", "{opdf:.2f} / {opdf_last:.2f}"),
+        ("OPDF oracle %", "{opdf_oracle:.2f}"),
+        ("wall s per session", "{wall_s:.2f}")]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sessions", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=2024, help="seed of the rearrangements")
+    ap.add_argument("--methods", default="paper,fuse,remap,none")
+    args = ap.parse_args(argv)
+    from scenarios.methods import check_method
+
+    methods = [check_method(m.strip(), "--methods") for m in args.methods.split(",")]
+    t0 = time.perf_counter()
+    scn, moved = bench_soak.soak_scenario(args.sessions, args.seed)
+    results = {}
+    for method in methods:
+        print(f"{method} ...", file=sys.stderr, flush=True)
+        results[method] = summary(bench_soak.run_soak(scn, moved, progress=False,
+                                                      method=method))
+    print(f"| {args.sessions} sessions, seed {args.seed} | " + " | ".join(methods) + " |")
+    print("|---|" + "---|" * len(methods))
+    for label, fmt in ROWS:
+        print(f"| {label} | " + " | ".join(fmt.format(**results[m]) for m in methods) + " |")
+    print(f"\nTotal wall time {time.perf_counter() - t0:.0f} s.")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,438 @@
+"""Studies: the cross product of scenarios, seeds, methods and configuration values, run on a
+local process pool or as Ray tasks, with resumable per-run results.
+
+    mapupdate sweep study.yaml --out DIR [--workers N] [--ray auto|ADDRESS]
+
+The spec (YAML)::
+
+    scenarios: [aws_small_warehouse, {generate: {seeds: [1, 2, 3], size: [30, 20], sessions: 3}}]
+    seeds: [7, 8]                        # run seeds (default: each scenario's own)
+    methods: [paper, fuse, remap, none]  # scenarios.methods.METHODS (default: paper)
+    quick: true                          # the quick routes of `mapupdate run --quick`
+    sessions: 3                          # the first K sessions only (default: all)
+    config: {updater: {fill_gaps: true}} # the base robot configuration, as --config reads it
+    grid: {updater.threshold: [5, 7, 9]} # dotted keys into the configuration's sections
+
+Every spec error (an unknown key, an unknown method, an empty list, a grid key that is not a
+configuration key, a value the configuration refuses) is refused, with the nearest valid name,
+before any run starts. Each run is ``runner.run_scenario`` with the options ``mapupdate run``
+would give it, in its own folder ``DIR/runs/<key>/``; when it ends, its rows go atomically to
+``DIR/runs/<key>/result.json``, which marks it finished: the same command run again skips it,
+so a killed sweep resumes. Generated scenarios are written once to ``DIR/scenarios/``. At the
+end ``scenarios.study_report`` writes ``DIR/results.csv``, ``DIR/summary.md`` and the box
+plots.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from gridmap import MapUpdatingError
+from gridmap.suggest import did_you_mean
+
+SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
+GENERATE_KEYS = ("seeds", "size", "sessions", "fov")
+RESULT_FORMAT = 1
+
+
+class SweepError(MapUpdatingError, ValueError):
+    """A sweep spec or study folder that cannot be used; the message names the file and key."""
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a study: what ``mapupdate run`` is asked, and where its outputs go."""
+
+    key: str                   # its folder under DIR/runs
+    scenario: str              # the scenario's name
+    scenario_file: str
+    seed: int | None           # None: the scenario's own
+    method: str
+    quick: bool
+    sessions: int | None
+    config: dict               # robot configuration sections (base and grid point)
+    point: dict = field(default_factory=dict)   # the grid point: dotted key -> value
+
+    def definition(self) -> dict:
+        """What makes the run this run (its result is reused only for the same)."""
+        from .checkpoint import _sha256
+
+        d = asdict(self)
+        d["scenario_sha256"] = _sha256(Path(self.scenario_file))
+        return d
+
+
+# --- the spec --------------------------------------------------------------------------------
+def _fail(source: str, key: str, message: str):
+    raise SweepError(f"{source}: {key}: {message}" if key else f"{source}: {message}")
+
+
+def _nonempty_list(value, source: str, key: str) -> list:
+    if not isinstance(value, list):
+        _fail(source, key, f"expected a list, got {type(value).__name__}")
+    if not value:
+        _fail(source, key, "the list is empty")
+    return value
+
+
+def _integers(value, source: str, key: str, minimum: int = 0) -> list[int]:
+    for j, v in enumerate(_nonempty_list(value, source, key)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+            _fail(source, f"{key}[{j}]", f"expected an integer >= {minimum}, got {v!r}")
+    if len(set(value)) != len(value):
+        _fail(source, key, f"a value is listed twice: {value}")
+    return list(value)
+
+
+def _check_keys(node, known, source: str, key: str) -> dict:
+    if not isinstance(node, dict):
+        _fail(source, key, f"expected a mapping, got {type(node).__name__}")
+    for k in node:
+        if k not in known:
+            _fail(source, f"{key}.{k}" if key else str(k),
+                  f"unknown key {k!r}{did_you_mean(k, known)} (keys: {', '.join(known)})")
+    return node
+
+
+def load_spec(path) -> dict:
+    """The spec of ``path``, checked; raises ``SweepError`` at the first problem."""
+    import yaml
+
+    path = Path(path)
+    source = str(path)
+    try:
+        spec = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise SweepError(f"{path}: sweep spec not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SweepError(f"{path}: cannot read the sweep spec ({e})") from None
+    except yaml.YAMLError as e:
+        raise SweepError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None
+    spec = _check_keys(spec, SPEC_KEYS, source, "")
+    if "scenarios" not in spec:
+        _fail(source, "scenarios", "missing required key")
+    return check_spec(spec, source, path.parent)
+
+
+def check_spec(spec: dict, source: str, base: Path) -> dict:
+    """The spec with defaults filled in and every entry checked (see the module docstring)."""
+    from .methods import check_method
+
+    out = {"scenarios": [_scenario_entry(s, source, f"scenarios[{j}]", base)
+                         for j, s in enumerate(_nonempty_list(spec["scenarios"], source,
+                                                              "scenarios"))]}
+    out["seeds"] = _integers(spec["seeds"], source, "seeds") if "seeds" in spec else [None]
+    methods = _nonempty_list(spec.get("methods", ["paper"]), source, "methods")
+    for j, m in enumerate(methods):
+        check_method(m, f"{source}: methods[{j}]")
+    if len(set(methods)) != len(methods):
+        _fail(source, "methods", f"a method is listed twice: {methods}")
+    out["methods"] = list(methods)
+    out["quick"] = spec.get("quick", False)
+    if not isinstance(out["quick"], bool):
+        _fail(source, "quick", f"expected true or false, got {out['quick']!r}")
+    out["sessions"] = spec.get("sessions")
+    if out["sessions"] is not None:
+        _integers([out["sessions"]], source, "sessions", minimum=1)
+    out["config"] = _base_config(spec.get("config"), source)
+    out["grid"] = _grid(spec.get("grid"), out["config"], source)
+    return out
+
+
+def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
+    from .catalog import find_scenario
+
+    if isinstance(entry, str):
+        local = base / entry
+        try:
+            path = find_scenario(local if local.is_file() else entry)
+        except MapUpdatingError as e:
+            _fail(source, key, str(e))
+        return {"file": str(path)}
+    node = _check_keys(entry, ("generate",), source, key)
+    if "generate" not in node:
+        _fail(source, key, "expected a scenario name or path, or {generate: {...}}")
+    return {"generate": _generate_entry(node["generate"], source, f"{key}.generate")}
+
+
+def _generate_entry(node, source: str, key: str) -> dict:
+    from .generator import check_arguments
+
+    node = _check_keys(node, GENERATE_KEYS, source, key)
+    if "seeds" not in node:
+        _fail(source, f"{key}.seeds", "missing required key (the layouts' seeds)")
+    seeds = _integers(node["seeds"], source, f"{key}.seeds")
+    size, sessions, fov = node.get("size", [30, 20]), node.get("sessions", 4), node.get("fov",
+                                                                                         270)
+    try:
+        w, h = check_arguments(size, sessions, fov)
+    except MapUpdatingError as e:
+        _fail(source, key, str(e))
+    return {"seeds": seeds, "size": [w, h], "sessions": sessions, "fov": fov}
+
+
+def _base_config(node, source: str) -> dict:
+    from .robot_config import load_robot_config
+
+    if node is None:
+        return {}
+    if not isinstance(node, dict):
+        _fail(source, "config", f"expected a mapping of sections, got {type(node).__name__}")
+    try:
+        return load_robot_config(node, source=f"{source}: config").to_dict()
+    except MapUpdatingError as e:
+        raise SweepError(str(e)) from None
+
+
+def _grid(node, config: dict, source: str) -> dict:
+    """Dotted key -> values; every value is tried on its section now, so that a bad one stops
+    the sweep before its first run."""
+    from dataclasses import fields
+
+    from .robot_config import CLASSES, SECTIONS, section_config
+
+    if node is None:
+        return {}
+    if not isinstance(node, dict):
+        _fail(source, "grid", f"expected a mapping of dotted keys to lists, got "
+                              f"{type(node).__name__}")
+    if not node:
+        _fail(source, "grid", "the mapping is empty (leave 'grid' out for no grid)")
+    for key, values in node.items():
+        section, _, name = str(key).partition(".")
+        where = f"grid.{key}"
+        if section not in SECTIONS or not name:
+            _fail(source, where, f"a grid key is <section>.<key> with a section of "
+                                 f"{', '.join(SECTIONS)}{did_you_mean(section, SECTIONS)}")
+        known = [f.name for f in fields(CLASSES[section])]
+        if name not in known:
+            _fail(source, where, f"{name!r} is not a key of section '{section}'"
+                                 f"{did_you_mean(name, known)}")
+        for v in _nonempty_list(values, source, where):
+            try:
+                section_config(section, {**config.get(section, {}), name: v}, source, where)
+            except MapUpdatingError as e:
+                raise SweepError(str(e)) from None
+    return dict(node)
+
+
+# --- the runs --------------------------------------------------------------------------------
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.=+-]+", "-", text).strip("-")
+
+
+def scenario_files(spec: dict, out_dir: Path, progress: bool = False) -> list[tuple[str, Path]]:
+    """(name, file) of every scenario of the spec; generated ones are written to
+    ``DIR/scenarios/`` unless already there (generation is deterministic)."""
+    import sim
+
+    from .generator import write_generated
+
+    out = []
+    for entry in spec["scenarios"]:
+        if "file" in entry:
+            out.append((sim.load_scenario(entry["file"]).name, Path(entry["file"])))
+            continue
+        g = entry["generate"]
+        for seed in g["seeds"]:
+            w, h = g["size"]
+            name = f"generated_{seed}_{w:g}x{h:g}" + ("_360" if g["fov"] == 360 else "")
+            path = out_dir / "scenarios" / f"{name}_k{g['sessions']}.yaml"
+            if not path.exists():
+                write_generated(seed, path, (w, h), g["sessions"], g["fov"])
+            out.append((name, path))
+    names = [n for n, _ in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SweepError(f"scenario {twice[0]!r} is listed twice")
+    return out
+
+
+def _points(grid: dict) -> list[dict]:
+    """The cross product of the grid's values, the first key varying slowest."""
+    points = [{}]
+    for key, values in grid.items():
+        points = [{**p, key: v} for p in points for v in values]
+    return points
+
+
+def _with_point(config: dict, point: dict) -> dict:
+    out = {section: dict(values) for section, values in config.items()}
+    for key, value in point.items():
+        section, _, name = key.partition(".")
+        out.setdefault(section, {})[name] = value
+    return out
+
+
+def plan(spec: dict, out_dir: Path) -> list[RunSpec]:
+    """Every run of the spec, in the order of the results: scenario, seed, method, grid point."""
+    runs = []
+    for name, path in scenario_files(spec, out_dir):
+        for seed in spec["seeds"]:
+            for method in spec["methods"]:
+                for point in _points(spec["grid"]):
+                    parts = [name, "seed-default" if seed is None else f"seed{seed}", method]
+                    parts += [f"{k}={v}" for k, v in point.items()]
+                    runs.append(RunSpec(_slug("__".join(parts)), name, str(path.resolve()),
+                                        seed, method, spec["quick"], spec["sessions"],
+                                        _with_point(spec["config"], point), point))
+    return runs
+
+
+# --- one run ---------------------------------------------------------------------------------
+class SessionClock:
+    """Times each update session from its start to its scores (an observer: told outside the
+    timed parts of the session, so it changes nothing of the run)."""
+
+    def __init__(self):
+        self.wall: dict[str, float] = {}
+        self._t0 = 0.0
+
+    def session_start(self, *args) -> None:
+        self._t0 = time.perf_counter()
+
+    def scan(self, *args) -> None:
+        pass
+
+    def session_end(self, result) -> None:
+        self.wall[result.name] = time.perf_counter() - self._t0
+
+
+def execute(run: RunSpec, runs_dir) -> dict:
+    """Play ``run`` as ``mapupdate run`` would, in ``runs_dir/<key>/``, and write its rows to
+    ``result.json`` there (atomically, last: the mark that the run is finished)."""
+    from gridmap.atomic import write_atomically
+
+    from .robot_config import load_robot_config
+    from .runner import RunOptions, run_scenario
+    from .study_report import session_rows
+
+    folder = Path(runs_dir) / run.key
+    if folder.exists():
+        # a run a killed sweep left unfinished (no result.json): the sweep's own output,
+        # played again from the start, since a new run never goes into a folder holding one
+        import shutil
+
+        shutil.rmtree(folder)
+    config = load_robot_config(run.config or None, source=run.key)
+    clock = SessionClock()
+    t0 = time.perf_counter()
+    result = run_scenario(run.scenario_file, RunOptions(
+        out=folder, seed=run.seed, sessions=run.sessions, quick=run.quick, progress=False,
+        updater_config=config.updater, localizer_config=config.localizer,
+        pose_check_config=config.pose_check, observer=clock, method=run.method))
+    record = {"format": RESULT_FORMAT, "run": run.definition(),
+              "wall_s": time.perf_counter() - t0,
+              "rows": session_rows(folder, result.metrics, clock.wall)}
+    write_atomically(folder / "result.json", json.dumps(record, indent=1) + "\n")
+    return record
+
+
+def finished(run: RunSpec, runs_dir) -> dict | None:
+    """The record of ``run`` if it finished before, else None. A record of another definition
+    under the same key (a spec changed between two sweeps into one folder) is refused."""
+    path = Path(runs_dir) / run.key / "result.json"
+    if not path.exists():
+        return None
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise SweepError(f"{path}: unreadable ({e}); delete it to run the run again") from None
+    if not isinstance(record, dict) or record.get("format") != RESULT_FORMAT:
+        raise SweepError(f"{path}: not a sweep result of format {RESULT_FORMAT}")
+    # compared as JSON reads it back (tuples of a configuration come back as lists)
+    if record.get("run") != json.loads(json.dumps(run.definition())):
+        raise SweepError(f"{path}: a result of another definition of run {run.key} (the spec "
+                         f"or the scenario file changed); use another --out")
+    return record
+
+
+# --- all runs --------------------------------------------------------------------------------
+def _sequential(runs, runs_dir):
+    for run in runs:
+        yield run, execute(run, runs_dir)
+
+
+def _pool(runs, runs_dir, workers: int):
+    """Yield (run, record) as the runs finish on a pool of ``workers`` processes."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    # spawn: a fresh interpreter per worker, whatever threads the parent runs
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        pending = {pool.submit(execute, run, str(runs_dir)): run for run in runs}
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    run = pending.pop(future)
+                    yield run, future.result()
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def _progress(enabled: bool, **kw):
+    from tqdm import tqdm
+
+    return tqdm(disable=not enabled, dynamic_ncols=True, unit="run", **kw)
+
+
+def default_workers() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:      # not on Linux
+        return os.cpu_count() or 1
+
+
+def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None,
+              progress: bool = True) -> int:
+    """Run every unfinished run of the spec into ``out``, then write the study's results;
+    returns the number of runs of the spec. ``workers``: processes of the local pool (default
+    the CPUs; 1 runs in this process); ``ray``: "auto" (a local Ray) or a cluster's address."""
+    from gridmap.atomic import write_atomically
+
+    from .study_report import summarise
+
+    spec = load_spec(spec_path)
+    if workers is not None and (isinstance(workers, bool) or workers < 1):
+        raise SweepError(f"--workers must be at least 1, got {workers}")
+    if ray is not None:
+        from .sweep_ray import require_ray
+
+        require_ray()
+    out = Path(out)
+    runs_dir = out / "runs"
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    runs = plan(spec, out)
+    done = {run.key for run in runs if finished(run, runs_dir) is not None}
+    write_atomically(out / "sweep.json", json.dumps(
+        {"format": RESULT_FORMAT, "spec": spec, "runs": [r.key for r in runs]}, indent=1) + "\n")
+    todo = [run for run in runs if run.key not in done]
+    workers = default_workers() if workers is None else workers
+    with _progress(progress, total=len(runs), initial=len(done), desc="runs") as bar:
+        for run, _record in _dispatch(todo, runs_dir, workers, ray):
+            bar.set_postfix_str(run.key[-40:], refresh=False)
+            bar.update(1)
+    summarise(out)
+    return len(runs)
+
+
+def _dispatch(todo, runs_dir, workers: int, ray: str | None):
+    try:
+        if ray is not None:
+            from .sweep_ray import ray_tasks
+
+            yield from ray_tasks(execute, todo, runs_dir, ray, workers)
+        elif workers == 1 or len(todo) <= 1:
+            yield from _sequential(todo, runs_dir)
+        else:
+            yield from _pool(todo, runs_dir, min(workers, len(todo)))
+    except MapUpdatingError as e:
+        raise SweepError(f"a run failed: {e}") from None

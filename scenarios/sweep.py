@@ -234,18 +234,22 @@ def scenario_files(spec: dict, out_dir: Path, progress: bool = False) -> list[tu
     from .generator import write_generated
 
     out = []
-    for entry in spec["scenarios"]:
-        if "file" in entry:
-            out.append((sim.load_scenario(entry["file"]).name, Path(entry["file"])))
-            continue
-        g = entry["generate"]
-        for seed in g["seeds"]:
-            w, h = g["size"]
-            name = f"generated_{seed}_{w:g}x{h:g}" + ("_360" if g["fov"] == 360 else "")
-            path = out_dir / "scenarios" / f"{name}_k{g['sessions']}.yaml"
-            if not path.exists():
-                write_generated(seed, path, (w, h), g["sessions"], g["fov"])
-            out.append((name, path))
+    layouts = sum(len(e["generate"]["seeds"]) for e in spec["scenarios"] if "generate" in e)
+    with _progress(progress and layouts > 0, total=layouts, desc="layouts", unit="layout",
+                   leave=False) as bar:
+        for entry in spec["scenarios"]:
+            if "file" in entry:
+                out.append((sim.load_scenario(entry["file"]).name, Path(entry["file"])))
+                continue
+            g = entry["generate"]
+            for seed in g["seeds"]:
+                w, h = g["size"]
+                name = f"generated_{seed}_{w:g}x{h:g}" + ("_360" if g["fov"] == 360 else "")
+                path = out_dir / "scenarios" / f"{name}_k{g['sessions']}.yaml"
+                if not path.exists():
+                    write_generated(seed, path, (w, h), g["sessions"], g["fov"])
+                out.append((name, path))
+                bar.update(1)
     names = [n for n, _ in out]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
@@ -269,10 +273,10 @@ def _with_point(config: dict, point: dict) -> dict:
     return out
 
 
-def plan(spec: dict, out_dir: Path) -> list[RunSpec]:
+def plan(spec: dict, out_dir: Path, progress: bool = False) -> list[RunSpec]:
     """Every run of the spec, in the order of the results: scenario, seed, method, grid point."""
     runs = []
-    for name, path in scenario_files(spec, out_dir):
+    for name, path in scenario_files(spec, out_dir, progress):
         for seed in spec["seeds"]:
             for method in spec["methods"]:
                 for point in _points(spec["grid"]):
@@ -381,7 +385,7 @@ def _pool(runs, runs_dir, workers: int):
 def _progress(enabled: bool, **kw):
     from tqdm import tqdm
 
-    return tqdm(disable=not enabled, dynamic_ncols=True, unit="run", **kw)
+    return tqdm(disable=not enabled, dynamic_ncols=True, **{"unit": "run", **kw})
 
 
 def default_workers() -> int:
@@ -410,7 +414,7 @@ def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None
     out = Path(out)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    runs = plan(spec, out)
+    runs = plan(spec, out, progress)
     done = {run.key for run in runs if finished(run, runs_dir) is not None}
     write_atomically(out / "sweep.json", json.dumps(
         {"format": RESULT_FORMAT, "spec": spec, "runs": [r.key for r in runs]}, indent=1) + "\n")

@@ -283,8 +283,15 @@ def _add_render(sub) -> None:
 
 
 def _cmd_generate(args) -> int:
+    from .catalog import HERE
     from .generator import write_generated
+    from .outputs import OutputClash
 
+    out = Path(args.out)
+    if out.exists() and (out.is_dir() or out.resolve().parent == HERE):
+        # a folder, or one of the built-in scenarios this package ships
+        raise OutputClash(f"{out}: is {'a folder' if out.is_dir() else 'a built-in scenario'}; "
+                          "choose another --out")
     path = write_generated(args.seed, args.out, size=tuple(args.size), sessions=args.sessions,
                            fov=args.fov)
     print(f"wrote {path}")

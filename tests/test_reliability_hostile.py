@@ -468,3 +468,16 @@ def test_a_run_with_bags_killed_mid_session_resumes_and_rewrites_its_unfinished_
                                       observer=Observers(recorder)))
     assert recorder.paths["W2"] == bags / "W2.bag" and not (bags / ".partial-W2.bag").exists()
     assert bag_topics(bags / "W2.bag")["/scan"] == "sensor_msgs/msg/LaserScan"
+
+
+def test_generate_never_writes_over_a_built_in_scenario_or_into_a_folder_name(tmp_path, capsys):
+    from scenarios.catalog import find_scenario
+
+    builtin = find_scenario("aws_small_warehouse")
+    before = builtin.read_bytes()
+    for out, words in ((builtin, "built-in scenario"), (tmp_path, "is a folder")):
+        capsys.readouterr()
+        assert main(["generate", "--seed", "3", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1
+    assert builtin.read_bytes() == before

@@ -207,12 +207,7 @@ def _add_update(sub) -> None:
     upd.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
                      help=CONFIG_HELP + " (updater keys go under 'updater:', also when they "
                                         "are the only ones)")
-    upd.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
-                     help="log format (default: detected)")
-    upd.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
-    upd.add_argument("--odom-topic", default=None)
-    upd.add_argument("--pose-topic", default=None)
-    upd.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_log_options(upd)
     upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
                           "covariance) calls unsure (default: off; README, 'Choices')")
@@ -222,14 +217,23 @@ def _add_update(sub) -> None:
                           "the log's localisation if it has one, else over the whole map)")
     upd.add_argument("--trajectory", type=Path, default=None, metavar="OUT.tum",
                      help="write the robot pose of each scan the update used (TUM, for evo)")
-    upd.add_argument("--strict", action="store_true",
-                     help="refuse a log with a malformed line or message instead of skipping "
-                          "and counting it")
     upd.add_argument("--smooth-poses", type=float, default=0.0, metavar="SECONDS",
                      help="smooth a recorded localisation that jitters from scan to scan with "
                           "the odometry over this window (default 0: off; README)")
     upd.set_defaults(func=_cmd_update)
 
+
+def _add_log_options(p) -> None:
+    """What ``update`` and ``map`` both need to read a log."""
+    p.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
+                   help="log format (default: detected)")
+    p.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
+    p.add_argument("--odom-topic", default=None)
+    p.add_argument("--pose-topic", default=None)
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a log with a malformed line or message instead of skipping "
+                        "and counting it")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _add_map(sub) -> None:
@@ -244,14 +248,7 @@ def _add_map(sub) -> None:
     mp.add_argument("--poses", default="recorded", choices=["recorded", "truth"],
                     help="the log's recorded (corrected) poses, or a simulated log's true "
                          "ones (default: recorded)")
-    mp.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
-                    help="log format (default: detected)")
-    mp.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
-    mp.add_argument("--odom-topic", default=None)
-    mp.add_argument("--pose-topic", default=None)
-    mp.add_argument("--strict", action="store_true",
-                    help="refuse a log with a malformed line or message")
-    mp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_log_options(mp)
     mp.set_defaults(func=_cmd_map)
 
 

@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=50)
     ap.add_argument("--seed", type=int, default=2024, help="seed of the rearrangements")
-    ap.add_argument("--methods", default="paper,fuse,remap,none")
+    ap.add_argument("--methods", default="paper,hybrid,fuse,remap,none")
     args = ap.parse_args(argv)
     from scenarios.methods import check_method
 

@@ -3,8 +3,10 @@
 Each cell holds the log-odds l = log(p / (1 - p)) of being occupied, starting at 0 (p = 0.5).
 A beam with a return lowers every cell it passes through by ``miss`` and raises the cell of its
 end point by ``hit``; a beam with no return (inf, or at or beyond range_max) lowers the cells up
-to ``no_return_clearance`` and raises none. Values are clamped to [clamp_min, clamp_max] so that
-the map can still change later. Thresholding gives the trinary map: occupied above
+to ``no_return_clearance`` and raises none. With ``hit_guard`` g > 0 a scan gives no miss to
+the cells within g cells of one of its returns (rays grazing a face the same scan hits are no
+evidence that it is gone; M1 is mapped without it). Values are clamped to [clamp_min,
+clamp_max] so that the map can still change later. Thresholding gives the trinary map: occupied above
 ``occupied_above``, free below ``free_below``, unknown in between (which includes every cell no
 beam ever reached).
 
@@ -38,6 +40,7 @@ class LogOddsParams:
     occupied_above: float = 0.6       # p > 0.65: one hit marks a cell occupied
     free_below: float = -0.6          # p < 0.35: two misses mark a cell free
     no_return_clearance: float = 5.0  # [m] free space assumed along a beam with no return
+    hit_guard: int = 0                # [cells] around a return that the same scan gives no miss
 
     def __post_init__(self):
         for f in fields(self):
@@ -52,6 +55,8 @@ class LogOddsParams:
             "occupied_above": (0 <= self.occupied_above < self.clamp_max, "in [0, clamp_max)"),
             "free_below": (self.clamp_min < self.free_below <= 0, "in (clamp_min, 0]"),
             "no_return_clearance": (self.no_return_clearance >= 0, ">= 0"),
+            "hit_guard": (self.hit_guard == int(self.hit_guard) and 0 <= self.hit_guard <= 10,
+                          "a whole number of cells in [0, 10]"),
         }
         for key, (ok, rule) in rules.items():
             if not ok:
@@ -98,7 +103,8 @@ class LogOddsMapper:
         angles = scan.angles() + sensor_pose.theta
         ranges = scan.ranges.astype(np.float64) / res
         clearance = self.params.no_return_clearance
-        limits = np.array([scan.range_min, scan.range_max, clearance]) / res
+        limits = np.array([scan.range_min / res, scan.range_max / res, clearance / res,
+                           self.params.hit_guard])
         # A walk of length L grid units visits at most |dx| + |dy| + 2 <= sqrt(2) L + 2 cells.
         cap = int(math.ceil(math.sqrt(2.0) * max(scan.range_max, clearance) / res)) + 4
         rows = np.empty(cap, np.int64)

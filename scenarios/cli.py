@@ -179,7 +179,8 @@ def _add_run(sub) -> None:
     run.add_argument("--method", default="paper", metavar="NAME",
                      help="what updates the map: paper (the updater, default), none (keep "
                           "M(i-1)), remap (a fresh log-odds map of the session), fuse "
-                          "(log-odds mapping on M(i-1) as the prior)")
+                          "(log-odds mapping on M(i-1) as the prior), hybrid (the paper's "
+                          "detector decides where, fuse's evidence what)")
     run.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",

@@ -24,6 +24,11 @@ remap     a fresh log-odds map from the session's own scans and the localiser's 
 fuse      log-odds mapping continued on M_{i-1} as the prior (plain lifelong occupancy
           mapping): its occupied cells start at the clamp's top, its free cells at its bottom,
           so an old cell turns free after 11 misses and a free one occupied after 4 hits
+hybrid    the paper's detector decides where, occupancy evidence decides what: ``fuse``'s
+          log-odds map, fed the scans the paper's updater processed (past its gate, pose
+          check and lost check, at the pose it used), sets the cells within
+          ``HYBRID_RADIUS`` of the hits of the beams the paper's classifier found changed
+          and of the cells the paper's map changed; everywhere else the map is the paper's
 ========  ===================================================================================
 
 Every method sees the same scans: the baselines apply the updater's gate (``UpdaterConfig``'s
@@ -31,7 +36,7 @@ gating rules) and the pose check exactly as the updater does (asked only past th
 refined pose is used, a refused scan changes nothing and does not advance the gate), so the
 runner's observable cells, and so its targets, are those of the same processed scans. What
 differs is only what a method does with a scan. The baselines have no lost check: log-odds
-mapping has none.
+mapping has none (the hybrid has the paper's, since the paper's updater runs inside it).
 """
 
 from __future__ import annotations
@@ -40,11 +45,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED, MapUpdatingError, OccupancyGrid, Pose2D, PoseVerdict, Scan
+from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D,
+                     PoseVerdict, Scan)
 from gridmap.suggest import did_you_mean
 
 # The methods, the paper's first (the default).
-METHODS = ("paper", "none", "remap", "fuse")
+METHODS = ("paper", "none", "remap", "fuse", "hybrid")
+
+# [m] how far from the paper's detected changes the hybrid lets occupancy evidence decide: the
+# pairing distance D(r) at its shortest, within which the paper reads a face as unchanged
+HYBRID_RADIUS = 0.15
 
 
 class MethodError(MapUpdatingError, ValueError):
@@ -70,6 +80,8 @@ def make_method(name: str, reference: OccupancyGrid, updater_config=None):
     config = UpdaterConfig() if updater_config is None else updater_config
     if name == "none":
         return KeepMap(reference, config)
+    if name == "hybrid":
+        return HybridMethod(reference, config)
     return LogOddsMethod(reference, config, prior=(name == "fuse"))
 
 
@@ -174,10 +186,7 @@ class LogOddsMethod(GatedMethod):
         super().__init__(reference, config)
         self.mapper = LogOddsMapper(reference)
         if prior:
-            # M_{i-1} as if every cell had saturated: the clamps are what let it change again
-            p = self.mapper.params
-            self.mapper.logodds[self._ref == OCCUPIED] = p.clamp_max
-            self.mapper.logodds[self._ref == FREE] = p.clamp_min
+            _start_from(self.mapper, self._ref)
 
     def integrate(self, scan: Scan, sensor_pose: Pose2D) -> None:
         self.mapper.add_scan(scan, sensor_pose)
@@ -188,3 +197,134 @@ class LogOddsMethod(GatedMethod):
     def state_bytes(self) -> int:
         # M_{i-1}, the float32 log-odds and the mapper's int32 per-cell scan stamps
         return int(self._ref.nbytes + 2 * self.mapper.logodds.nbytes)
+
+
+class HybridMethod:
+    """``hybrid``: the paper's updater, as it is, decides where the map may change; a log-odds
+    map continued on M_{i-1} (``fuse``'s), fed the scans the updater processed at the poses it
+    used, decides what the cells there become.
+
+    Where: cells within ``radius`` of the hit of a beam the paper's classifier kept as a
+    detected change, or of a cell the paper's map changed. Beams that agree with M open no
+    place to change, so the evidence cannot free a wall far from any change, nor draw what
+    the detector calls unchanged; near a change it finishes a face that the new-obstacle
+    tolerance tol(r) leaves in pieces and frees what is left of an old face inside the pairing
+    distance D(r), which the paper's rules never touch. What: the log-odds map's state where
+    it has evidence, else the paper's. Three rules keep the evidence from undoing the paper's
+    care (measured in benchmarks/RESULTS.md, "The hybrid"): a scan's rays give no miss to the
+    cells beside its own returns (``LogOddsParams.hit_guard``, as the paper's seen-surface
+    guard); a cell the paper's map has occupied is not freed beside a cell the evidence has
+    occupied (with one cell of slack that only thins a face); and the evidence sets only
+    cells M knows: M's unknown cells stay the paper's (its removed-obstacle walk frees the
+    inside of an object that is gone, its last check closes outlines), since the evidence
+    would free an object's inside from the rays of one scan placed a few centimetres off, and
+    draw a wall's far side from hits behind it.
+    """
+
+    def __init__(self, reference: OccupancyGrid, config, radius: float = HYBRID_RADIUS):
+        from gridmap.mapping import LogOddsMapper, LogOddsParams
+        from updater import MapUpdater
+
+        self.paper = MapUpdater(reference, config)
+        self.config = config
+        self.radius = float(radius)
+        self.mapper = LogOddsMapper(reference, LogOddsParams(hit_guard=1))
+        _start_from(self.mapper, reference.data)
+        self._ref = reference.data.copy()
+        self._res, self._origin = reference.resolution, reference.origin
+        self._detected = np.zeros(self._ref.shape, bool)   # hit cells of detected changes
+        self._cache: np.ndarray | None = None
+
+    def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None,
+                pose_check: Callable[[], PoseVerdict] | None = None):
+        """The paper's updater on the scan (gate, pose check, lost check and all); a scan it
+        processed and kept goes into the evidence at the pose it used."""
+        from updater import BEAM_CHANGE, ScanStatus
+
+        used = [sensor_pose]
+
+        def check() -> PoseVerdict:
+            verdict = pose_check()
+            if isinstance(verdict, PoseVerdict) and verdict.sensor_pose is not None:
+                used.append(verdict.sensor_pose)
+            return verdict
+
+        report = self.paper.process(scan, sensor_pose, odometry,
+                                    None if pose_check is None else check)
+        if report.status is ScanStatus.PROCESSED:
+            self.mapper.add_scan(scan, used[-1])
+            self._mark_hits(scan, used[-1], report.verdicts == BEAM_CHANGE)
+            self._cache = None
+        return report
+
+    def _mark_hits(self, scan: Scan, pose: Pose2D, beams: np.ndarray) -> None:
+        r = scan.ranges[beams].astype(np.float64)
+        a = scan.angles()[beams] + pose.theta
+        col = np.floor((pose.x + r * np.cos(a) - self._origin[0]) / self._res).astype(np.int64)
+        row = np.floor((pose.y + r * np.sin(a) - self._origin[1]) / self._res).astype(np.int64)
+        h, w = self._ref.shape
+        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        self._detected[row[inside], col[inside]] = True
+
+    def current(self) -> np.ndarray:
+        """The map as it stands (computed when a scan was processed since the last call)."""
+        if self._cache is None:
+            from gridmap.distance import distance_to_occupied
+
+            paper = self.paper.updated_map().data
+            seeds = self._detected | (paper != self._ref)
+            marks = OccupancyGrid(np.where(seeds, OCCUPIED, FREE).astype(np.int8), self._res,
+                                  self._origin)
+            where = distance_to_occupied(marks, 2 * self.radius) <= self.radius + 1e-6
+            what = self.mapper.to_grid().data
+            take = where & (what != UNKNOWN) & (self._ref != UNKNOWN)
+            take &= ~((what == FREE) & (paper == OCCUPIED) & _beside(what == OCCUPIED))
+            paper[take] = what[take]
+            self._cache = paper
+        return self._cache
+
+    # --- the rest of the interface, as the baselines have it ---------------------------------
+    @property
+    def stats(self) -> dict:
+        return self.paper.stats
+
+    def updated_map(self) -> OccupancyGrid:
+        return OccupancyGrid(self.current().copy(), self._res, self._origin)
+
+    @property
+    def reference_map(self) -> OccupancyGrid:
+        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
+
+    @property
+    def n_changed(self) -> int:
+        return int(np.count_nonzero(self.current() != self._ref))
+
+    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.nonzero(self.current() != self._ref)
+
+    def change_counts(self) -> np.ndarray:
+        return (self.current() != self._ref).astype(np.uint8)
+
+    def state_bytes(self) -> int:
+        # the paper's state, the float32 log-odds and int32 scan stamps, the detected hits
+        return int(self.paper.state_bytes() + 2 * self.mapper.logodds.nbytes
+                   + self._detected.nbytes)
+
+
+def _start_from(mapper, reference: np.ndarray) -> None:
+    """M_{i-1} as the mapper's prior, as if every known cell had saturated: its occupied cells
+    at the clamp's top, its free ones at its bottom (the clamps are what let them change)."""
+    p = mapper.params
+    mapper.logodds[reference == OCCUPIED] = p.clamp_max
+    mapper.logodds[reference == FREE] = p.clamp_min
+
+
+def _beside(mask: np.ndarray) -> np.ndarray:
+    """Cells with an 8-neighbour in ``mask``."""
+    p = np.pad(mask, 1)
+    out = np.zeros_like(mask)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                out |= p[1 + dr:p.shape[0] - 1 + dr, 1 + dc:p.shape[1] - 1 + dc]
+    return out

@@ -7,7 +7,7 @@ The spec (YAML)::
 
     scenarios: [aws_small_warehouse, {generate: {seeds: [1, 2, 3], size: [30, 20], sessions: 3}}]
     seeds: [7, 8]                        # run seeds (default: each scenario's own)
-    methods: [paper, fuse, remap, none]  # scenarios.methods.METHODS (default: paper)
+    methods: [paper, hybrid, fuse, remap, none]  # scenarios.methods.METHODS (default: paper)
     quick: true                          # the quick routes of `mapupdate run --quick`
     sessions: 3                          # the first K sessions only (default: all)
     config: {updater: {fill_gaps: true}} # the base robot configuration, as --config reads it

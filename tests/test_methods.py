@@ -104,7 +104,7 @@ def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys)
     assert main(["run", "--method", "remapp", "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["mapupdate run: error: --method: unknown method 'remapp' (did you mean "
-                   "'remap'?) (methods: paper, none, remap, fuse)"]
+                   "'remap'?) (methods: paper, none, remap, fuse, hybrid)"]
     assert not out.exists()
 
 
@@ -140,3 +140,73 @@ def test_a_resumed_run_keeps_its_method_and_refuses_another(tmp_path):
     resumed = run_scenario(None, RunOptions(out=out, resume=True, sessions=2, progress=False))
     assert resumed.metrics["method"] == "fuse" and len(resumed.metrics["sessions"]) == 2
     assert "method fuse" in (out / "report.md").read_text()
+
+
+def _drive(method, reference_map, shapes, seed=1, seconds=40.0):
+    """``method`` on ``reference_map`` through the pipeline, one drive round the room; the
+    pipeline and the detected-change hit points (x, y) of the scans the updater processed."""
+    from updater import BEAM_CHANGE, ScanStatus
+
+    pipeline = RobotPipeline(make_method(method, reference_map))
+    hits = []
+    for true, noisy, t in world.Drive(seconds=seconds, seed=seed).steps():
+        scan = world.full_scan(shapes, true, t)
+        step = pipeline.step(scan, world.Pose2D(0.0, 0.0, 0.0), odometry=true, pose=noisy)
+        if step.report.status is ScanStatus.PROCESSED:
+            changed = np.zeros(scan.beams, bool)
+            changed[step.report.verdicts == BEAM_CHANGE] = True
+            valid = np.isfinite(scan.ranges)
+            x, y = world.hit_points(scan, noisy)
+            hits.append(np.column_stack([x, y])[changed[valid]])
+    return pipeline, np.vstack(hits)
+
+
+def test_hybrid_differs_from_the_paper_only_near_what_the_paper_detected(maps):
+    """Where the hybrid's map differs from the paper's, a detected change's hit or a cell the
+    paper changed lies within HYBRID_RADIUS; and it changes no cell M has unknown."""
+    from scenarios.methods import HYBRID_RADIUS
+
+    ref = reference().data
+    shapes = world.room_walls() + [ADDED]
+    pipeline, hits = _drive("paper", reference(), shapes)
+    paper, hybrid = maps["paper"][0], maps["hybrid"][0]
+    assert np.array_equal(paper, pipeline.updater.updated_map().data)   # the fixture's drive
+    rows, cols = np.nonzero(hybrid != paper)
+    assert rows.size > 0
+    centres = np.column_stack([(cols + 0.5) * world.RES, (rows + 0.5) * world.RES])
+    changed = np.column_stack(np.nonzero(paper != ref))[:, ::-1]
+    seeds = np.vstack([hits, (changed + 0.5) * world.RES])
+    nearest = np.sqrt(((centres[:, None, :] - seeds[None, :, :]) ** 2).sum(-1)).min(axis=1)
+    # one cell of slack: a hit point lies anywhere in its cell
+    assert nearest.max() <= HYBRID_RADIUS + world.RES * np.sqrt(0.5) + 1e-9
+    assert not np.any((hybrid != paper) & (ref == UNKNOWN))
+
+
+def test_hybrid_draws_more_of_a_moved_box_than_the_paper_and_nothing_else():
+    """A box moved by 0.2 m, less than the pairing distance: the paper draws a third of its new
+    outline (tol(r) keeps new-obstacle flags away from the old outline, and the beams on the
+    near faces pair with it); the hybrid, whose evidence decides near the detected changes,
+    draws most of it, frees as much of the old outline, draws almost nothing false and frees
+    no wall."""
+    old = Rect(7.0125, 3.0125, 7.6125, 3.6125)
+    new = Rect(7.2125, 3.1125, 7.8125, 3.7125)
+    ref = world.rasterise(world.room_walls(), hollow=[old])
+    truth = world.rasterise(world.room_walls(), hollow=[new]).data
+    near_new = world.dilate(truth == OCCUPIED, 1)
+    old_face = (ref.data == OCCUPIED) & world.cells_of(old) & ~near_new
+    new_face = (truth == OCCUPIED) & (ref.data != OCCUPIED)
+    walls = np.zeros(truth.shape, bool)
+    for w in world.room_walls():
+        walls |= world.cells_of(w)
+    out = {}
+    for name in ("paper", "hybrid"):
+        data = _drive(name, ref, world.room_walls() + [new])[0].updater.updated_map().data
+        out[name] = {"old_freed": (data[old_face] == FREE).mean(),
+                     "new_drawn": world.dilate(data == OCCUPIED, 1)[new_face].mean(),
+                     "false": int(((data == OCCUPIED) & (ref.data != OCCUPIED)
+                                   & ~near_new).sum()),
+                     "walls_freed": int(((data == FREE) & walls).sum())}
+    paper, hybrid = out["paper"], out["hybrid"]
+    assert paper["new_drawn"] < 0.45 and hybrid["new_drawn"] >= paper["new_drawn"] + 0.2, out
+    assert hybrid["old_freed"] >= paper["old_freed"], out
+    assert hybrid["false"] <= 8 and hybrid["walls_freed"] == 0, out

@@ -110,8 +110,8 @@ class WarehouseMapUpdateEnv(gym.Env):
       of ``config``); ``pose_check`` (on): whether the pose check runs.
     * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
     * ``method``: what updates the map, as ``mapupdate run --method``: ``paper`` (the
-      updater, default), ``none``, ``remap`` or ``fuse`` (``scenarios.methods``); an unknown
-      name is refused (``MethodError``) with the nearest valid one.
+      updater, default), ``none``, ``remap``, ``fuse`` or ``hybrid`` (``scenarios.methods``);
+      an unknown name is refused (``MethodError``) with the nearest valid one.
 
     ## Version History
 

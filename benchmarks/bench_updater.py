@@ -110,6 +110,7 @@ PARTS = (("virtual beams cast (cast_virtual)", ("cast_virtual",)),
          ("changed cells: new obstacles", ("flag_new_obstacles",)),
          ("unchanged cells: free walks", ("flag_free_unchanged",)),
          ("unchanged cells: occupied", ("flag_occupied_unchanged",)),
+         ("unchanged cells: hits of changes", ("flag_hit_surfaces",)),
          ("push and decide", ("push_flags", "decide")))
 
 

@@ -1,14 +1,19 @@
 """MIT Killian Court (../shared/data/killian.clf.gz: CARMEN ROBOTLASER1 lines, gzip, corrected
 poses, 3 873 scans over 128 minutes): a map of the first third of the scans, updated with the
-last third through ``update_from_log``, must free no cell of a surface that both thirds' maps
-have occupied, and move no further from the last third's map (CC and OPDF over the cells both
+last third through ``update_from_log``, must free no cell that both thirds' maps have
+occupied, and move no further from the last third's map (CC and OPDF over the cells both
 observed). Also the time it takes, per 1000 scans.
 
-Of the 2 323 cells occupied in both thirds' maps, 2 are freed: specks with at most one
-occupied neighbour in the first third's map, in open floor that the first third saw from afar
-with a few rays and the last third crosses; one hit makes a cell occupied in a log-odds map,
-and the last third's scans see through them 7 times in 10. Every cell with two or more
-occupied neighbours in both maps (1 905 cells: walls, pillars) is kept.
+Of the 2 323 cells occupied in both thirds' maps, 1 905 have two or more occupied neighbours in
+both (walls, pillars). The hardest of the rest are specks at the corners of recesses along a
+corridor that the first third saw only from 18-24 m, one hit each and nothing else around them:
+in the first map they are occupied cells in unknown space. The last third drives up that
+corridor, looks past them (the beams end 0.1-1.5 m behind), and later drives back and hits
+them at 1.3-9 m. Around them M is unknown, so every beam there is a detected change, and
+before ``UpdaterConfig.confirm_hit_surfaces`` the hits gave no unchanged flag: the walks of
+the way up and the unknown cells around them seen through (neighbour support) freed 3 of
+them, although the same session hit them last (its log-odds map has them occupied because the
+hits came last).
 
 Run with ``-s`` to print the figures.
 """
@@ -84,7 +89,7 @@ def occupied_neighbours(grid) -> np.ndarray:
                for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc)
 
 
-def test_no_surface_occupied_in_both_thirds_is_freed(killian):
+def test_no_cell_occupied_in_both_thirds_is_freed(killian):
     first, last, updated = killian["first"], killian["last"], killian["updated"]
     both = (first.data == OCCUPIED) & (last.data == OCCUPIED)
     surfaces = both & (occupied_neighbours(first) >= 2) & (occupied_neighbours(last) >= 2)
@@ -92,8 +97,8 @@ def test_no_surface_occupied_in_both_thirds_is_freed(killian):
     print(f"\nKillian: {int(both.sum())} cells occupied in both thirds, {int(freed.sum())} "
           f"freed; {int(surfaces.sum())} of them on surfaces, "
           f"{int((surfaces & freed).sum())} freed")
-    assert surfaces.sum() > 1000 and not np.any(surfaces & freed)
-    assert freed.sum() <= 0.002 * both.sum()
+    assert both.sum() > 2000 and surfaces.sum() > 1000
+    assert not np.any(freed)
 
 
 def test_the_update_moves_no_further_from_the_last_third(killian):

@@ -1,7 +1,8 @@
 """Every kernel of updater._kernels against a plain NumPy / Python reference, on seeded random
 input, and the steps of updater.steps where they add something of their own: the per-beam
-distances against ALGORITHM.md's numbers written out here, and the two rules that are not in
-the paper (the seen-surface guard, fill_gaps) in a synthetic room. The references are written
+distances against ALGORITHM.md's numbers written out here, and the rules that are not in
+the paper (the seen-surface guard, fill_gaps, the hits that confirm M's surfaces) in a
+synthetic room. The references are written
 for clarity, not speed, and share no code with the kernels or the configuration."""
 
 from __future__ import annotations
@@ -379,6 +380,23 @@ def ref_flag_occupied(data, hits, verdict):
     return cells
 
 
+def ref_flag_hit_surfaces(data, hits, verdict):
+    """Occupied cells among the hit cell and its 4-neighbours of CHANGE and SKIPPED beams whose
+    hit cell is on the map and not free."""
+    h, w = data.shape
+    cells = set()
+    for i in range(len(hits)):
+        r0, c0 = math.floor(hits[i, 1]), math.floor(hits[i, 0])
+        if verdict[i] not in (K.CHANGE, K.SKIPPED) or not (0 <= r0 < h and 0 <= c0 < w) \
+                or data[r0, c0] == FREE:
+            continue
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            rr, cc = r0 + dr, c0 + dc
+            if 0 <= rr < h and 0 <= cc < w and data[rr, cc] == OCC:
+                cells.add(rr * w + cc)
+    return cells
+
+
 def ref_flag_free(data, sensor, hits, reach, verdict):
     w = data.shape[1]
     cells = {}                  # a dict keeps the order of first flags
@@ -436,6 +454,24 @@ def test_flag_unchanged_kernels_against_reference(seed, free_fraction, free_marg
     assert out[:n].tolist() == ref_flag_free(data, sensor, hits, reach, verdict) and n > 0
     assert sorted(out[n:n_all].tolist()) == sorted(ref_flag_occupied(data, hits, verdict))
     assert n_all > n
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_flag_hit_surfaces_kernel_against_reference(seed):
+    data, sensor, r, hits, verdict = _evaluator_input(seed)
+    some = np.argwhere(data != FREE)[:len(hits):3]    # some hits on occupied or unknown cells
+    hits[:len(some)] = some[:, ::-1] + 0.5
+    marks = np.zeros((data.size + 7) // 8, np.uint8)
+    out = np.zeros(5000, np.int32)
+    out[:3] = (7, 8, 9)                                  # flags of the evaluator before it
+    n = K.flag_hit_surfaces(data, hits, verdict, marks, out, 3)
+    expect = ref_flag_hit_surfaces(data, hits, verdict)
+    assert out[:3].tolist() == [7, 8, 9] and n - 3 == len(expect) > 0
+    assert set(out[3:n].tolist()) == expect
+    assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == sorted(expect)
+    # cells the unchanged-cells evaluator flagged already (marked) get no second flag
+    n_again = K.flag_hit_surfaces(data, hits, verdict, marks, out, n)
+    assert n_again == n
 
 
 def change_beam(sensor, r, hit, cfg):

@@ -342,16 +342,55 @@ def test_a_sub_cell_pose_error_leaves_kept_objects_whole_and_still_frees_a_remov
     for k in kept:
         kept_cells |= world.cells_of(k)
     kept_cells &= ref.data == OCCUPIED
+    # The seen-surface guard (radius) and the hits that confirm M's surfaces (confirm), each
+    # alone and together (the default).
+    radius = UpdaterConfig().seen_surface_radius
     freed = {}
-    for radius in (0.0, UpdaterConfig().seen_surface_radius):
-        freed[radius] = 0
+    for guard in ((0.0, False), (radius, False), (0.0, True), (radius, True)):
+        freed[guard] = 0
         for dx, dy in ((0.04, 0.0), (0.0, -0.04)):
-            updater, _, seen = drive(ref, walls + kept, UpdaterConfig(seen_surface_radius=radius),
+            config = UpdaterConfig(seen_surface_radius=guard[0], confirm_hit_surfaces=guard[1])
+            updater, _, seen = drive(ref, walls + kept, config,
                                      offset=lambda p: Pose2D(p.x + dx, p.y + dy, p.theta))
             out = updater.updated_map().data
             outline = box & (ref.data == OCCUPIED) & (seen >= T)
             assert (out[outline] == FREE).all() and (out[box] == FREE).all()
             assert not (out[(ref.data == OCCUPIED) & ~box & ~kept_cells] == FREE).any()
-            freed[radius] += int((out[kept_cells] == FREE).sum())
-    assert freed[0.0] > 40                 # without the guard: corners of kept boxes freed
-    assert freed[UpdaterConfig().seen_surface_radius] <= 6
+            freed[guard] += int((out[kept_cells] == FREE).sum())
+    assert freed[0.0, False] > 40          # neither: corners of kept boxes freed (measured 58)
+    assert freed[radius, False] <= 6       # the guard (measured 4)
+    assert freed[0.0, True] <= 20          # the confirming hits (measured 16)
+    assert freed[radius, True] == 0        # both
+
+
+def test_cells_the_scans_hit_are_kept_where_m_knows_nothing_around_them():
+    """M has the room's walls and three panels, and none of its free space: no virtual beam
+    gets past the unknown cells around the sensor, so every beam is a detected change and only
+    the hits can tell that M is right. With ``confirm_hit_surfaces`` a hit on a cell M has as
+    occupied or unknown gives M's occupied cells there an unchanged flag: the walls and the
+    panel that stays are kept, the panel gone for the first half of the drive and back for the
+    second is kept, and the panel gone all along is still freed. With the paper's rules the
+    walks of the beams that pass the walls' and panels' edges, and the unknown cells around
+    them seen through (neighbour support), free parts of them (the Killian Court log's
+    specks)."""
+    walls = world.room_walls()
+    back = Rect(5.1125, 5.4125, 5.9125, 5.5125)
+    gone = Rect(4.1125, 6.6125, 4.9125, 6.7125)
+    stays = Rect(6.1125, 4.3125, 6.9125, 4.4125)
+    ref = world.rasterise(walls + [back, gone, stays])
+    ref.data[ref.data == FREE] = UNKNOWN
+    cells = {name: world.cells_of(r) & (ref.data == OCCUPIED)
+             for name, r in (("back", back), ("gone", gone), ("stays", stays))}
+    wall_cells = (ref.data == OCCUPIED) & ~cells["back"] & ~cells["gone"] & ~cells["stays"]
+    freed = {}
+    for confirm in (False, True):
+        updater, _, _ = drive(ref, lambda t: walls + [stays] + ([back] if t >= 40.0 else []),
+                              UpdaterConfig(confirm_hit_surfaces=confirm))
+        out = updater.updated_map().data
+        freed[confirm] = {name: int((out[c] == FREE).sum()) for name, c in cells.items()}
+        freed[confirm]["walls"] = int((out[wall_cells] == FREE).sum())
+        assert freed[confirm]["gone"] == cells["gone"].sum()
+    assert freed[True]["walls"] == 0 and freed[True]["stays"] == 0
+    assert freed[True]["back"] <= 0.1 * cells["back"].sum()          # measured 2 of 51
+    assert freed[False]["walls"] > 50 and freed[False]["stays"] > 10  # measured 160 and 31
+    assert freed[False]["back"] == cells["back"].sum()

@@ -403,6 +403,30 @@ def flag_occupied_unchanged(ref, hits, verdict, marks, out, n):
     return n
 
 
+# --- hits confirm M's surfaces (not in the paper) ---------------------------------------------
+@njit(cache=True)
+def flag_hit_surfaces(ref, hits, verdict, marks, out, n):
+    """Unchanged flags, appended to ``out`` from position n, for the occupied cells of ``ref``
+    among the hit cell and its 4-neighbours of each CHANGE or SKIPPED beam whose hit cell lies
+    on the map and is not free in ``ref``; each cell once (``marks``, shared with the
+    unchanged-cells evaluator). Returns the new count."""
+    height, width = ref.shape
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE and verdict[i] != SKIPPED:
+            continue
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
+        if not (0 <= row0 < height and 0 <= col0 < width) or ref[row0, col0] == FREE:
+            continue
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            row, col = row0 + dr, col0 + dc
+            if 0 <= row < height and 0 <= col < width and ref[row, col] == OCC:
+                if test_and_set(marks, row * width + col):
+                    out[n] = row * width + col
+                    n += 1
+    return n
+
+
 # --- growth into the unknown (not in the paper) -----------------------------------------------
 @njit(cache=True)
 def is_open_unknown(ref_flat, enclosed, idx):

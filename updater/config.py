@@ -93,6 +93,12 @@ class UpdaterConfig:
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
+    # Not in the paper (steps.flag_hit_surfaces): a detected change, or a beam within n_skip of
+    # one, whose hit lands in a cell M has as occupied or unknown gives the occupied cells of M
+    # among that cell and its 4-neighbours an unchanged flag, as an agreeing beam would. A cell
+    # the session keeps hitting is then not freed by the walks of other scans, also where M is
+    # unknown all around and every beam counts as a change (the Killian Court log).
+    confirm_hit_surfaces: bool = True
     # --- Buffers and decision -----------------------------------------------------------------
     buffer_size: int = 10                    # N_b flags per cell
     threshold: int = 7                       # T: changed when n_c (+ support) reaches this
@@ -103,7 +109,7 @@ class UpdaterConfig:
 
     def __post_init__(self):
         for name in ("gating", "neighbour_support", "last_check", "fill_gaps",
-                     "grow_into_unknown"):
+                     "grow_into_unknown", "confirm_hit_surfaces"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")

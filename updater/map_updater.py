@@ -187,7 +187,8 @@ class MapUpdater:
         new-obstacle flags, unchanged flags)."""
         cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
         grow = cfg.grow_into_unknown
-        # the seen-surface guard, fill_gaps and the growth into the unknown are not in the paper
+        # the seen-surface guard, fill_gaps, the growth into the unknown and the hits that
+        # confirm M's surfaces (flag_hit_surfaces) are not in the paper
         guarded = steps.guard_seen_surfaces(ref, beams, cfg, res, self._ch_marks,
                                             self._enclosed, ws)
         n_hits = steps.list_unknown_hits(ref, beams, self._enclosed, self._hit_marks,
@@ -199,6 +200,7 @@ class MapUpdater:
         steps.release_seen_surfaces(self._ch_marks, guarded, ws)
         n_ch, n_gaps = steps.fill_gaps(ref, beams, cfg, res, self._ch_marks, ws, n_ch)
         n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
         if grow:
             n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
         hist = self._hist.reshape(-1)

@@ -196,6 +196,8 @@ def _add_compare(sub) -> None:
 
 
 def _add_update(sub) -> None:
+    from localization.smoothing import SMOOTH_WINDOW
+
     upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
     upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
     upd.add_argument("--log", type=Path, required=True,
@@ -218,9 +220,10 @@ def _add_update(sub) -> None:
                           "the log's localisation if it has one, else over the whole map)")
     upd.add_argument("--trajectory", type=Path, default=None, metavar="OUT.tum",
                      help="write the robot pose of each scan the update used (TUM, for evo)")
-    upd.add_argument("--smooth-poses", type=float, default=0.0, metavar="SECONDS",
-                     help="smooth a recorded localisation that jitters from scan to scan with "
-                          "the odometry over this window (default 0: off; README)")
+    upd.add_argument("--smooth-poses", type=float, default=SMOOTH_WINDOW, metavar="SECONDS",
+                     help="smooth a recorded localisation (map -> odom, corrected poses) that "
+                          "jitters from scan to scan with the odometry over this window "
+                          f"(default {SMOOTH_WINDOW:g}; 0: the poses as recorded)")
     upd.set_defaults(func=_cmd_update)
 
 

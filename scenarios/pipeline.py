@@ -9,7 +9,8 @@ a ROS message) into ``step`` calls and its answer into their outputs.
 
 Where the robot's pose comes from: the localiser when the pipeline has one (it is updated with
 the scan and its estimate is carried to the scan's odometry, the map -> odom convention of
-ROS), else the pose the caller gives (a recorded localisation, the truth). The pose check's
+ROS), else the pose the caller gives (a recorded localisation, the truth), smoothed with the
+odometry when the pipeline has a ``localization.smoothing.PoseSmoother``. The pose check's
 answer is a typed ``gridmap.PoseVerdict`` and the updater's a ``ScanReport`` with a
 ``ScanStatus``; the counters read those, never a text.
 """
@@ -61,16 +62,20 @@ class RobotPipeline:
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
     ``tracking``: a ``localization.tracking.TrackingMonitor``, judging the localiser after each
-    filter update; while it is not tracking, scans are withheld from the updater. ``cpu`` holds
+    filter update; while it is not tracking, scans are withheld from the updater.
+    ``smoother``: a ``localization.smoothing.PoseSmoother`` for the poses given with the scans
+    (a recorded localisation that jitters), used only without a localiser. ``cpu`` holds
     the process time spent in the localiser (tracking verdict included) and in the updater
     (pose check included) [s].
     """
 
-    def __init__(self, updater=None, localizer=None, pose_check=None, tracking=None):
+    def __init__(self, updater=None, localizer=None, pose_check=None, tracking=None,
+                 smoother=None):
         self.updater = updater
         self.localizer = localizer
         self.pose_check = pose_check
         self.tracking = tracking
+        self.smoother = smoother
         self.counts = PipelineCounts()
         self.cpu = {"localizer_s": 0.0, "updater_s": 0.0}
 
@@ -79,7 +84,7 @@ class RobotPipeline:
         """Place one scan and hand it to the updater. ``mount``: the lidar on the robot (base
         frame); ``odometry``: the robot's odom-frame pose at the scan's time (the localiser's
         motion input and the updater's gate); ``pose``: the robot's map-frame pose, used only
-        when the pipeline has no localiser."""
+        when the pipeline has no localiser (through its smoother, when it has one)."""
         self.counts.scans += 1
         robot, cov = self._locate(scan, mount, odometry, pose)
         if robot is None:
@@ -113,6 +118,8 @@ class RobotPipeline:
     def _locate(self, scan, mount, odometry, pose):
         """(robot pose in the map frame, its covariance or None)."""
         if self.localizer is None:
+            if self.smoother is not None and pose is not None:
+                pose = self.smoother(float(scan.time), pose, odometry)
             return pose, None
         if odometry is None:
             return None, None

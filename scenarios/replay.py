@@ -37,6 +37,8 @@ import numpy as np
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
 from robotlogs import LogError, Observation, log_observations
 
+from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
+
 from .pipeline import RobotPipeline
 
 POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
@@ -73,7 +75,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                     end_time: float | None = None, seed: int = 0,
                     pose_check: bool = False, pose_check_config=None,
                     trajectory_path=None, tracking_config=None,
-                    smooth_window: float = 0.0) -> dict:
+                    smooth_window: float = SMOOTH_WINDOW) -> dict:
     """Update the map at ``map_path`` with the scans of ``log_path``; write ``out_path``.
 
     With ``state_path``, the updater's state is loaded from it when the file exists (so this
@@ -83,10 +85,10 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
     change nothing (``localization.confidence.PoseCheck``). ``strict``: a malformed log line or
     message is an error instead of a counted skip. ``smooth_window`` [s]: recorded poses of a
     localisation apart from the odometry are smoothed with it over that window
-    (``PoseSmoother``; 0: used as recorded). ``trajectory_path``: the robot pose of each
-    scan the update was given, as it was placed (the pose check's refinement where it refined;
-    scans it refused and scans withheld while the localiser was not tracking are left out), in
-    TUM format. Returns a summary: counts, pose source, what was skipped, how the localiser
+    (``localization.smoothing.PoseSmoother``; 0: used as recorded). ``trajectory_path``: the
+    robot pose of each scan the update was given, as it was placed (smoothed, and the pose
+    check's refinement where it refined; scans it refused and scans withheld while the
+    localiser was not tracking are left out), in TUM format. Returns a summary: counts, pose source, what was skipped, how the localiser
     fared, cells changed, wall time."""
     from gridmap import load_map
 
@@ -100,15 +102,14 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                              laser_mount=laser_mount)
     source = _choose_source(pose_source, found.has, log_path, initial_pose is not None)
     updater, state_loaded = _updater(grid, updater_config, state_path)
-    pipeline = _pipeline(updater, pose_check, pose_check_config)
+    pipeline = _pipeline(updater, pose_check, pose_check_config,
+                         _smoother(smooth_window, source, found.has))
     starter = None
     if source == "localizer":
         starter = LocalizerStart(grid, localizer_config, initial_pose, initial_std, seed,
                                  found.has["map_frame"], tracking_config, pose_check_config)
-    smoother = PoseSmoother(smooth_window) if smooth_window > 0 and source == "recorded" \
-        and found.has["map_frame"] else None
     replay = _replay(pipeline, found, source, starter, (start_time, end_time),
-                     f"updating from {Path(log_path).name}" if progress else None, smoother)
+                     f"updating from {Path(log_path).name}" if progress else None)
     _check_placed(pipeline, replay, found, log_path)
     updated = _save_outputs(updater, replay, out_path, state_path, trajectory_path)
     c = pipeline.counts
@@ -121,6 +122,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
         **_changes(grid, updated), "read": found.stats.as_dict(),
         "read_lines": found.stats.lines(), "tracking": _tracking_summary(pipeline, replay),
         "trajectory": None if trajectory_path is None else str(trajectory_path),
+        "smoothing": _smoothing_summary(pipeline.smoother),
         "wall_s": _time.perf_counter() - wall0,
     }
 
@@ -130,17 +132,32 @@ def _check_arguments(pose_source, smooth_window) -> None:
         raise LogError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, "
                        f"got {pose_source!r}")
     if isinstance(smooth_window, bool) or not isinstance(smooth_window, (int, float)) \
-            or not 0 <= smooth_window <= 60:
-        raise LogError(f"the smoothing window must be 0 (off) to 60 s, got {smooth_window!r}")
+            or not 0 <= smooth_window <= MAX_WINDOW:
+        raise LogError(f"the smoothing window must be 0 (off) to {MAX_WINDOW:g} s, got "
+                       f"{smooth_window!r}")
 
 
-def _pipeline(updater, pose_check: bool, pose_check_config) -> RobotPipeline:
+def _smoother(window: float, source: str, has: dict) -> PoseSmoother | None:
+    """The smoother of recorded poses: only for a localisation apart from the odometry."""
+    if window > 0 and source == "recorded" and has["map_frame"] and has["odometry"]:
+        return PoseSmoother(window)
+    return None
+
+
+def _smoothing_summary(smoother: PoseSmoother | None) -> dict:
+    if smoother is None:
+        return {"window_s": 0.0, "scans_smoothed": 0, "restarts": 0}
+    return {"window_s": smoother.window, "scans_smoothed": smoother.smoothed,
+            "restarts": smoother.restarts}
+
+
+def _pipeline(updater, pose_check: bool, pose_check_config, smoother=None) -> RobotPipeline:
     guard = None
     if pose_check:
         from localization.confidence import PoseCheck
 
         guard = PoseCheck(updater.reference_map, pose_check_config)
-    return RobotPipeline(updater, pose_check=guard)
+    return RobotPipeline(updater, pose_check=guard, smoother=smoother)
 
 
 def _save_outputs(updater, replay: Replay, out_path, state_path, trajectory_path):
@@ -160,7 +177,7 @@ def _save_outputs(updater, replay: Replay, out_path, state_path, trajectory_path
 
 
 def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
-            progress: str | None, smoother=None) -> Replay:
+            progress: str | None) -> Replay:
     """Feed the log's observations within ``window`` (start, end [s], None for open) to the
     pipeline; the localiser, if the poses are to come from one, starts at the first
     observation with odometry. Returns what the update used."""
@@ -180,7 +197,7 @@ def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
                 out.start = starter.how
             if out.first_time is None:
                 out.first_time = obs.time
-            pose, mount = _given_pose(obs, source, smoother)
+            pose, mount = _given_pose(obs, source, pipeline.smoother is not None)
             step = pipeline.step(obs.scan, mount, odometry=obs.odom, pose=pose)
             _note_pose(out, obs, step, mount)
     return out
@@ -234,13 +251,14 @@ def _choose_source(asked: str, has: dict, log_path, start_given: bool = False) -
     return asked
 
 
-def _given_pose(obs: Observation, source: str, smoother=None) -> tuple[Pose2D | None, Pose2D]:
+def _given_pose(obs: Observation, source: str, smoothed: bool = False
+                ) -> tuple[Pose2D | None, Pose2D]:
     """(pose, mount): the robot's map-frame pose the log gives (None with the localiser, which
     makes its own) and the laser's mount on it, whose composition, made once, is the laser's
-    pose; a log that gives the laser pose itself gives it as the pose, with no mount. With a
-    ``smoother``, recorded poses are smoothed with the odometry (``PoseSmoother``)."""
-    if source == "recorded" and smoother is not None and obs.odom is not None:
-        return smoother(obs.time, obs.recorded, obs.odom), obs.mount
+    pose; a log that gives the laser pose itself gives it as the pose, with no mount, unless
+    the pose is to be ``smoothed`` with the odometry, which moves the robot, not the laser."""
+    if source == "recorded" and smoothed and obs.odom is not None:
+        return obs.recorded, obs.mount
     if source == "recorded" and obs.sensor is not None:
         return obs.sensor, NO_MOUNT
     if source == "recorded":
@@ -248,32 +266,6 @@ def _given_pose(obs: Observation, source: str, smoother=None) -> tuple[Pose2D | 
     if source == "truth":
         return obs.truth, obs.mount
     return None, obs.mount
-
-
-class PoseSmoother:
-    """Recorded map-frame poses smoothed with odometry over the last ``window`` seconds.
-
-    A recorded localisation jitters from scan to scan (a few centimetres, a fraction of a
-    degree: each filter update of amcl moves ``map -> odom`` a little), while wheel odometry is
-    smooth over a few metres. Each recorded pose of the window, carried to the current scan by
-    the odometry since it (``recorded_j (+) (odom_j^-1 (+) odom_k)``), predicts the current pose;
-    their mean (the circular mean for the heading) is the pose used. Only past scans count, so
-    a live robot could do the same; a real correction of the localisation comes through within
-    ``window``. Without odometry at a scan the recorded pose is used as it is."""
-
-    def __init__(self, window: float):
-        self.window = float(window)
-        self._past: list = []          # (time, recorded, odometry)
-
-    def __call__(self, time: float, recorded: Pose2D | None, odom: Pose2D | None):
-        if recorded is None or odom is None or not self.window > 0:
-            return recorded
-        self._past = [p for p in self._past if time - self.window < p[0] <= time]
-        self._past.append((time, recorded, odom))
-        guesses = np.array([r.compose(odom.relative_to(o)).as_array()
-                            for _, r, o in self._past])
-        yaw = math.atan2(np.sin(guesses[:, 2]).mean(), np.cos(guesses[:, 2]).mean())
-        return Pose2D(float(guesses[:, 0].mean()), float(guesses[:, 1].mean()), yaw)
 
 
 class LocalizerStart:
@@ -397,6 +389,12 @@ def summary_lines(s: dict) -> list[str]:
                f"processed past the gate, {g('scans_dropped_as_lost', 0)} dropped as lost, "
                f"{g('scans_refused_by_pose_check', 0)} refused by the pose check")
     out += [f"  {line}" for line in g("read_lines") or []]
+    smooth = g("smoothing") or {}
+    if smooth.get("scans_smoothed"):
+        out.append(f"  {smooth['scans_smoothed']} recorded poses jittered against the odometry "
+                   f"and were smoothed over {smooth['window_s']:g} s (--smooth-poses 0: as "
+                   f"recorded)" + (f"; {smooth['restarts']} jumps of the localisation restarted "
+                                   f"the smoothing" if smooth.get("restarts") else ""))
     out += [f"  warning: {w}" for w in _warnings(s)]
     track = g("tracking")
     if track:

@@ -119,7 +119,7 @@ def changed_right(grid: OccupancyGrid) -> tuple[float, float]:
 def test_recorded_tf_replay_equals_in_process_run(world, bag):
     d, steps = world
     summary = update_from_log(d / "map.yaml", d / bag, d / f"out_{bag}.yaml",
-                              updater_config=NO_GATING, progress=False)
+                              updater_config=NO_GATING, progress=False, smooth_window=0.0)
     assert summary["pose_source"] == "recorded"
     assert summary["scans"] == summary["scans_used"] == summary["scans_processed"] == len(steps)
     out = load_map(d / f"out_{bag}.yaml")
@@ -134,7 +134,7 @@ def test_amcl_pose_without_map_odom_tf(world, tmp_path):
     d, steps = world
     write_bag(tmp_path / "a.bag", bag_records(steps, map_odom_tf=False), "ros1")
     summary = update_from_log(d / "map.yaml", tmp_path / "a.bag", tmp_path / "out.yaml",
-                              updater_config=NO_GATING, progress=False)
+                              updater_config=NO_GATING, progress=False, smooth_window=0.0)
     assert summary["pose_source"] == "recorded" and summary["scans_used"] == len(steps)
     expected = load_map(d / "out_s.bag.yaml") if (d / "out_s.bag.yaml").exists() else \
         in_process(room([REMOVED]), steps, NO_GATING, recorded_sensor)
@@ -178,16 +178,19 @@ def test_auto_falls_back_to_the_localizer(world, tmp_path):
 
 
 def test_state_continues_across_recordings(world, tmp_path):
+    """(Poses as recorded: the smoothing's window starts afresh with each recording, so the
+    first scans of the second would be placed a little differently from the whole run's.)"""
     d, steps = world
     cut = steps[len(steps) // 2][0]
     state = tmp_path / "state.npz"
     first = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "a.yaml", state,
-                            end_time=cut - 0.1, progress=False)
+                            end_time=cut - 0.1, progress=False, smooth_window=0.0)
     assert not first["state_loaded"] and state.exists()
     second = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "b.yaml", state,
-                             start_time=cut, progress=False)
+                             start_time=cut, progress=False, smooth_window=0.0)
     assert second["state_loaded"]
-    whole = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "w.yaml", progress=False)
+    whole = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "w.yaml", progress=False,
+                            smooth_window=0.0)
     assert first["scans_used"] + second["scans_used"] == whole["scans_used"]
     np.testing.assert_array_equal(load_map(tmp_path / "b.yaml").data,
                                   load_map(tmp_path / "w.yaml").data)

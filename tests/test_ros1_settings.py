@@ -33,6 +33,7 @@ def test_defaults_are_rosy_and_sections_reach_the_configs():
     ({"queue_size": 0}, ["'~queue_size'"]),
     ({"scan_topics": []}, ["'~scan_topics'"]),
     ({"use_pose_check": "yes"}, ["'~use_pose_check'"]),
+    ({"smooth_poses": 120.0}, ["'~smooth_poses'", "[0, 60]"]),
     ({"updater": 3}, ["'~updater' must be a mapping"]),
 ])
 def test_bad_parameters_are_refused_with_a_line_that_names_them(params, words):
@@ -81,3 +82,11 @@ def test_changed_box_is_the_smallest_box_around_the_changes():
     b[1, 2] = 100
     b[4, 6] = -1
     assert changed_box(a, b) == (2, 1, 5, 4)       # x, y, width, height
+
+
+def test_the_node_smooths_recorded_poses_as_mapupdate_update_does_by_default():
+    from localization.smoothing import SMOOTH_WINDOW
+
+    settings, _, _ = node_settings({})
+    assert settings.smooth_poses == SMOOTH_WINDOW > 0
+    assert node_settings({"smooth_poses": 0.0})[0].smooth_poses == 0.0

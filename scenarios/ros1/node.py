@@ -94,14 +94,17 @@ class MapUpdaterNode:
         """Start afresh on ``reference``: new buffers, a new pose check (lock held or not
         needed)."""
         from localization.confidence import PoseCheck
+        from localization.smoothing import PoseSmoother
         from updater import MapUpdater
 
         from ..pipeline import RobotPipeline
 
         check = PoseCheck(reference, self.pose_check_config) \
             if self.settings.use_pose_check else None
+        smoother = PoseSmoother(self.settings.smooth_poses) \
+            if self.settings.smooth_poses > 0 else None
         self.pipeline = RobotPipeline(MapUpdater(reference, self.updater_config),
-                                      pose_check=check)
+                                      pose_check=check, smoother=smoother)
         self._published = None                   # publish the new map at the next period
 
     def _on_map(self, msg) -> None:

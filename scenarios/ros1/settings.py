@@ -32,6 +32,7 @@ class NodeSettings:
     tf_timeout: float = 0.2              # [s] a scan waits this long for its transforms
     queue_size: int = 200                # scans waiting to be processed; older ones dropped
     use_pose_check: bool = False         # as `mapupdate update --pose-check`
+    smooth_poses: float = 2.0            # [s] as `mapupdate update --smooth-poses`; 0: off
 
     def __post_init__(self):
         for name in ("map_frame", "odom_frame", "base_frame", "map_topic", "save_path"):
@@ -41,7 +42,8 @@ class NodeSettings:
         if not self.scan_topics or not all(isinstance(t, str) and t for t in self.scan_topics):
             raise NodeSettingsError(f"parameter '~scan_topics' must name one or more topics, "
                                     f"got {list(self.scan_topics)!r}")
-        for name, low, high in (("publish_period", 0.01, 3600.0), ("tf_timeout", 0.0, 10.0)):
+        for name, low, high in (("publish_period", 0.01, 3600.0), ("tf_timeout", 0.0, 10.0),
+                                ("smooth_poses", 0.0, 60.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or \
                     not (math.isfinite(v) and low <= v <= high):

@@ -337,18 +337,21 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
 
 
 def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
-    """A fresh updater on ``grid``, or the one saved in ``state_path`` when that exists. A
-    state holds its reference map whole, which is its fingerprint: it is refused for any other
+    """A fresh updater on ``grid`` (with ``config``, else with the robot's defaults,
+    ``robot_config.ROBOT_UPDATER_DEFAULTS``), or the one saved in ``state_path`` when that
+    exists. A state holds its reference map whole, which is its fingerprint: it is refused for any other
     map, and a configuration given with it must be the one it was made with (its buffers
     follow that configuration)."""
     from updater import MapUpdater, UpdaterConfig
+
+    from .robot_config import ROBOT_UPDATER_DEFAULTS
 
     if isinstance(config, dict):
         config = UpdaterConfig.from_dict(config)
     elif isinstance(config, (str, Path)):
         config = UpdaterConfig.from_yaml(config)
     if state_path is None or not Path(state_path).exists():
-        return MapUpdater(grid, config), False
+        return MapUpdater(grid, config or UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)), False
     upd = MapUpdater.load(state_path)
     ref = upd.reference_map
     if not ref.same_frame(grid):

@@ -90,3 +90,12 @@ def test_the_node_smooths_recorded_poses_as_mapupdate_update_does_by_default():
     settings, _, _ = node_settings({})
     assert settings.smooth_poses == SMOOTH_WINDOW > 0
     assert node_settings({"smooth_poses": 0.0})[0].smooth_poses == 0.0
+
+
+def test_the_node_grows_the_map_into_the_unknown_as_update_does_unless_configured():
+    """Without an ``updater`` section the robot's defaults (the paper's, with the growth into
+    the unknown); a section given is the updater's whole configuration, as in the YAML."""
+    _, updater, _ = node_settings({})
+    assert updater.grow_into_unknown is True
+    assert node_settings({"updater": {"threshold": 6}})[1].grow_into_unknown is True
+    assert node_settings({}, {"updater": {"threshold": 6}})[1].grow_into_unknown is False

@@ -11,6 +11,7 @@ from robotlogs.rosbag import bag_topics
 from scenarios.session_bags import SessionBagRecorder
 from scenarios.observers import Observers
 from scenarios.runner import RunOptions, run_scenario
+from updater import UpdaterConfig
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +39,10 @@ def test_replay_of_recorded_localisation_gives_the_in_process_map(bag_run, fmt, 
     bag = (ros1 if fmt == "ros1" else ros2).paths["W2"]
     out = tmp_path / "replayed.yaml"
     # the run asked the pose check (the runner's default), so the replay asks it too; the run
-    # placed each scan at its localiser's pose as it was, so the replay does not smooth them
+    # placed each scan at its localiser's pose as it was, so the replay does not smooth them;
+    # and the run's updater has the paper's defaults, not update's (which grow the map)
     summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", bag, out, progress=False,
-                              pose_check=True, smooth_window=0.0)
+                              pose_check=True, smooth_window=0.0, updater_config=UpdaterConfig())
     assert summary["pose_source"] == "recorded" and summary["scans_refused_by_pose_check"] > 0
     in_process = load_map(root / "run" / "maps" / "M_W2.yaml")
     replayed = load_map(out)

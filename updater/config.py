@@ -89,7 +89,7 @@ class UpdaterConfig:
     # (unknown, outside the enclosed regions): cells that beams looking into it see through
     # become free by their changed flags, cells hit become occupied by hit buffers of N_b flags
     # and the threshold T. Without it, a partly mapped place stays as unknown as M had it.
-    grow_into_unknown: bool = False          # on: mapupdate update --config, see README
+    grow_into_unknown: bool = False          # on in mapupdate update and the ROS node, README
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range

@@ -66,7 +66,8 @@ def node_settings(params: dict, base=None):
     from localization.confidence import PoseCheckConfig
     from updater import UpdaterConfig
 
-    from ..robot_config import SECTIONS, load_robot_config, section_config
+    from ..robot_config import (ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config,
+                                section_config)
 
     if not isinstance(params, dict):
         raise NodeSettingsError(f"private parameters must be a mapping, got {params!r}")
@@ -77,7 +78,8 @@ def node_settings(params: dict, base=None):
                                     f"{did_you_mean(key, own + list(SECTIONS))}")
     given = load_robot_config(base).to_dict()
     configs = {}
-    for name, default in (("updater", UpdaterConfig()), ("pose_check", PoseCheckConfig())):
+    for name, default in (("updater", UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)),
+                          ("pose_check", PoseCheckConfig())):
         merged = given.get(name, default.to_dict())
         extra = params.get(name, {})
         if not isinstance(extra, dict):

@@ -85,7 +85,39 @@ def make_method(name: str, reference: OccupancyGrid, updater_config=None):
     return LogOddsMethod(reference, config, prior=(name == "fuse"))
 
 
-class GatedMethod:
+class MapOutput:
+    """The interface's map side, from a method's reference map (``_ref``, ``_res``,
+    ``_origin``) and the map as it stands (``current()``): what the baselines and the hybrid
+    share."""
+
+    _ref: np.ndarray
+    _res: float
+    _origin: tuple
+
+    def current(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def updated_map(self) -> OccupancyGrid:
+        return OccupancyGrid(self.current().copy(), self._res, self._origin)
+
+    @property
+    def reference_map(self) -> OccupancyGrid:
+        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
+
+    @property
+    def n_changed(self) -> int:
+        return int(np.count_nonzero(self.current() != self._ref))
+
+    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the cells that differ from the reference map."""
+        return np.nonzero(self.current() != self._ref)
+
+    def change_counts(self) -> np.ndarray:
+        """No flag buffers here: 1 where the map differs from the reference, else 0."""
+        return (self.current() != self._ref).astype(np.uint8)
+
+
+class GatedMethod(MapOutput):
     """What the baselines share: the updater's gate and pose check in front of ``integrate``,
     and the interface's bookkeeping. Subclasses define ``integrate`` and ``current``."""
 
@@ -131,25 +163,6 @@ class GatedMethod:
         valid = int(np.count_nonzero(np.isfinite(scan.ranges)))
         return ScanReport(t, ScanStatus.PROCESSED, valid_beams=valid)
 
-    def updated_map(self) -> OccupancyGrid:
-        return OccupancyGrid(self.current(), self._res, self._origin)
-
-    @property
-    def reference_map(self) -> OccupancyGrid:
-        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
-
-    @property
-    def n_changed(self) -> int:
-        return int(np.count_nonzero(self.current() != self._ref))
-
-    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, cols) of the cells that differ from the reference map."""
-        return np.nonzero(self.current() != self._ref)
-
-    def change_counts(self) -> np.ndarray:
-        """No flag buffers here: 1 where the map differs from the reference, else 0."""
-        return (self.current() != self._ref).astype(np.uint8)
-
     def state_bytes(self) -> int:
         return int(self._ref.nbytes)
 
@@ -160,9 +173,6 @@ class GatedMethod:
 
     # --- what a baseline does ---------------------------------------------------------------------
     def integrate(self, scan: Scan, sensor_pose: Pose2D) -> None:
-        raise NotImplementedError
-
-    def current(self) -> np.ndarray:
         raise NotImplementedError
 
 
@@ -199,7 +209,7 @@ class LogOddsMethod(GatedMethod):
         return int(self._ref.nbytes + 2 * self.mapper.logodds.nbytes)
 
 
-class HybridMethod:
+class HybridMethod(MapOutput):
     """``hybrid``: the paper's updater, as it is, decides where the map may change; a log-odds
     map continued on M_{i-1} (``fuse``'s), fed the scans the updater processed at the poses it
     used, decides what the cells there become.
@@ -283,27 +293,9 @@ class HybridMethod:
             self._cache = paper
         return self._cache
 
-    # --- the rest of the interface, as the baselines have it ---------------------------------
     @property
     def stats(self) -> dict:
         return self.paper.stats
-
-    def updated_map(self) -> OccupancyGrid:
-        return OccupancyGrid(self.current().copy(), self._res, self._origin)
-
-    @property
-    def reference_map(self) -> OccupancyGrid:
-        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
-
-    @property
-    def n_changed(self) -> int:
-        return int(np.count_nonzero(self.current() != self._ref))
-
-    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
-        return np.nonzero(self.current() != self._ref)
-
-    def change_counts(self) -> np.ndarray:
-        return (self.current() != self._ref).astype(np.uint8)
 
     def state_bytes(self) -> int:
         # the paper's state, the float32 log-odds and int32 scan stamps, the detected hits

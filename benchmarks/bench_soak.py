@@ -344,7 +344,8 @@ def main(argv=None) -> int:
                     help="the runner's pose check (default on, as in the runner)")
     ap.add_argument("--fill-gaps", action="store_true", help="the updater's fill_gaps on")
     ap.add_argument("--method", default="paper",
-                    help="what updates the map (scenarios.methods: paper, none, remap, fuse, hybrid)")
+                    help="what updates the map (scenarios.methods: paper, none, remap, fuse, "
+                         "hybrid)")
     ap.add_argument("--lane-margin", type=float, default=LANE_MARGIN,
                     help=f"[m] clear space beside the robot's path, beyond its radius, that "
                          f"moved objects keep (default {LANE_MARGIN}; 0: the scenario checks "

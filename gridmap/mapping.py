@@ -6,9 +6,9 @@ end point by ``hit``; a beam with no return (inf, or at or beyond range_max) low
 to ``no_return_clearance`` and raises none. With ``hit_guard`` g > 0 a scan gives no miss to
 the cells within g cells of one of its returns (rays grazing a face the same scan hits are no
 evidence that it is gone; M1 is mapped without it). Values are clamped to [clamp_min,
-clamp_max] so that the map can still change later. Thresholding gives the trinary map: occupied above
-``occupied_above``, free below ``free_below``, unknown in between (which includes every cell no
-beam ever reached).
+clamp_max] so that the map can still change later. Thresholding gives the trinary map:
+occupied above ``occupied_above``, free below ``free_below``, unknown in between (which
+includes every cell no beam ever reached).
 
 This is how the initial map M1 is built from the mapping session's scans and true poses::
 

@@ -17,13 +17,21 @@ count, so a live robot does the same. A recorded pose farther than ``jump`` metr
 starts again from it, so a corrected pose is used at once rather than blended in over the
 window.
 
-Only a localisation that jitters is smoothed: one that moves against the odometry at most
-scans of the window (``jitter_share``; each scan's recorded pose compared with the last one
-carried by the odometry). amcl corrects ``map -> odom`` only at its filter updates (every
-0.2 m by default), so between them its poses follow the odometry exactly, and each update is a
-correction of the drift since the last; averaging those would only hold the corrections back
-(the simulated warehouse's bags, whose localiser works so: precision 0.976 -> 0.932 and recall
-0.902 -> 0.884 in W2 when smoothed). Such poses are used as they are.
+Only a localisation that jitters is smoothed, judged on the window's own poses, each recorded
+pose against an earlier one carried by the odometry (the innovation):
+
+- It moves against the odometry at most scans (``JITTER_SHARE``). amcl corrects
+  ``map -> odom`` only at its filter updates (every 0.2 m by default), so between them its
+  poses follow the odometry exactly, and each update is a correction of the drift since the
+  last; averaging those would only hold the corrections back (the simulated warehouse's bags,
+  whose localiser works so: precision 0.976 -> 0.932 and recall 0.902 -> 0.884 in W2 when
+  smoothed).
+- Its innovations do not grow with the lag (``MAX_GROWTH``). Jitter is fresh at every scan,
+  so a pose half a window back differs from the latest by no more than the previous one does;
+  odometry noise adds up, so with a precise localisation and noisy odometry the innovation
+  grows with the lag, and carrying old poses over it would add the odometry's error.
+
+A pose or odometry that is not finite is passed on as it is and kept out of the window.
 """
 
 from __future__ import annotations
@@ -45,6 +53,9 @@ JUMP_DEG = 5.0          # [deg] ... or turned this much
 JITTER_SHARE = 0.5      # smooth only when at least this share of the window's scans moved
 MOVED = 1e-4            # [m, rad] a recorded pose this far from the last one carried by the
                         # odometry moved against it (float rounding stays far below)
+MAX_GROWTH = 3.0        # ... and the mean squared innovation at half the window's length is
+                        # at most this many times the one at one scan
+MIN_POSES = 8           # poses in the window before any is smoothed
 
 
 class PoseSmoother:
@@ -67,25 +78,34 @@ class PoseSmoother:
     def __call__(self, time: float, recorded: Pose2D | None, odom: Pose2D | None):
         """The pose to use at a scan at ``time`` [s]; the recorded pose as it is when either
         pose is missing or the window is 0."""
-        if recorded is None or odom is None or not self.window > 0:
+        if recorded is None or odom is None or not self.window > 0 or \
+                not (recorded.is_finite() and odom.is_finite() and math.isfinite(time)):
             return recorded
-        moved = bool(self._past) and self._off(self._past[-1], recorded, odom, MOVED, MOVED)
         self._past = [p for p in self._past if time - self.window < p[0] <= time]
+        moved = bool(self._past) and _moved(_innovation(self._past[-1], recorded, odom))
         if self._past and self._jumped(self._predict(odom), recorded):
             self._past = []
             self.restarts += 1
         self._past.append((time, recorded, odom, moved))
-        if len(self._past) < 3 or sum(p[3] for p in self._past) < JITTER_SHARE * len(self._past):
+        if not self._jitters():
             return recorded
         self.smoothed += 1
         return self._predict(odom)
 
-    @staticmethod
-    def _off(past, recorded: Pose2D, odom: Pose2D, dist: float, angle: float) -> bool:
-        """Whether ``recorded`` lies farther than ``dist`` [m] or ``angle`` [rad] from the
-        ``past`` (time, recorded, odometry, ...) record's pose carried by the odometry."""
-        off = recorded.relative_to(past[1].compose(odom.relative_to(past[2])))
-        return math.hypot(off.x, off.y) > dist or abs(off.theta) > angle
+    def _jitters(self) -> bool:
+        """Whether the window's poses jitter against the odometry (module docstring)."""
+        past = self._past
+        n = len(past)
+        if n < MIN_POSES or sum(p[3] for p in past) < JITTER_SHARE * n:
+            return False
+        lag = n // 2
+        near = [_innovation(past[i], past[i + 1][1], past[i + 1][2]) for i in range(n - 1)]
+        far = [_innovation(past[i], past[i + lag][1], past[i + lag][2]) for i in range(n - lag)]
+        for k in (0, 1):        # position [m^2], heading [rad^2]
+            one = float(np.mean([d[k] for d in near]))
+            if one > 0 and float(np.mean([d[k] for d in far])) > MAX_GROWTH * one:
+                return False
+        return True
 
     def _predict(self, odom: Pose2D) -> Pose2D:
         guesses = np.array([p[1].compose(odom.relative_to(p[2])).as_array()
@@ -97,3 +117,14 @@ class PoseSmoother:
         off = recorded.relative_to(predicted)
         return math.hypot(off.x, off.y) > self.jump or \
             abs(math.degrees(off.theta)) > self.jump_deg
+
+
+def _innovation(past, recorded: Pose2D, odom: Pose2D) -> tuple[float, float]:
+    """(squared distance [m^2], squared turn [rad^2]) of ``recorded`` from the ``past``
+    (time, recorded, odometry, ...) record's pose carried to it by the odometry."""
+    off = recorded.relative_to(past[1].compose(odom.relative_to(past[2])))
+    return off.x * off.x + off.y * off.y, off.theta * off.theta
+
+
+def _moved(innovation: tuple[float, float]) -> bool:
+    return innovation[0] > MOVED * MOVED or innovation[1] > MOVED * MOVED

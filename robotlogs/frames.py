@@ -26,6 +26,7 @@ class PoseTimeline:
     """Poses of one frame in another at increasing times; built by ``add``, read by ``at``."""
 
     hold_after: float | None = None  # [s] past the last stamp; None: the ``hold`` asked for
+    steps: bool = False              # each pose holds until the next (no interpolation)
     _t: list = field(default_factory=list)
     _p: list = field(default_factory=list)
     _arrays: tuple | None = None
@@ -49,13 +50,17 @@ class PoseTimeline:
         return self._arrays
 
     def at(self, time: float, hold: float = HOLD_S) -> Pose2D | None:
-        """The pose at ``time``: interpolated inside, held up to ``hold`` [s] outside."""
+        """The pose at ``time``: interpolated inside (with ``steps``, the last one at or
+        before ``time``), held up to ``hold`` [s] outside."""
         if not self._t:
             return None
         t, p = self._frozen()
         after = hold if self.hold_after is None else self.hold_after
         if time < t[0] - hold or time > t[-1] + after:
             return None
+        if self.steps:
+            k = max(int(np.searchsorted(t, time, side="right")) - 1, 0)
+            return Pose2D(float(p[k, 0]), float(p[k, 1]), float(wrap_angle(float(p[k, 2]))))
         x = np.interp(time, t, p[:, 0])
         y = np.interp(time, t, p[:, 1])
         th = np.interp(time, t, p[:, 2])
@@ -76,10 +81,12 @@ class TransformTree:
     static: dict = field(default_factory=dict)   # child -> Pose2D
     dynamic: dict = field(default_factory=dict)  # child -> PoseTimeline
 
-    def add(self, rec: TransformRecord, hold_after: float | None = None) -> None:
+    def add(self, rec: TransformRecord, hold_after: float | None = None,
+            steps: bool = False) -> None:
         """Add one edge; an edge that would give a frame a second parent is ignored (tf's
         own rule: the first parent wins). ``hold_after`` [s]: how long the edge's last pose
-        holds (a localiser's correction holds until the next one)."""
+        holds; ``steps``: each of its poses holds until the next, not interpolated (a
+        localiser's correction holds until the next one)."""
         known = self.parent.get(rec.child)
         if known is not None and known != rec.parent:
             return
@@ -87,7 +94,8 @@ class TransformTree:
         if rec.static:
             self.static[rec.child] = rec.pose
         else:
-            self.dynamic.setdefault(rec.child, PoseTimeline(hold_after)).add(rec.time, rec.pose)
+            self.dynamic.setdefault(rec.child, PoseTimeline(hold_after, steps)).add(rec.time,
+                                                                                   rec.pose)
 
     def has_edge(self, parent: str, child: str) -> bool:
         return self.parent.get(child) == parent

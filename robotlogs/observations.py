@@ -98,7 +98,11 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
 
     The laser line's ``x y theta`` is the laser's pose (recorded localisation in corrected
     logs) and ``odom_*`` the robot's odometry; the mount is their difference (in raw logs the
-    front-laser offset), unless ``laser_mount`` is given.
+    front-laser offset), unless ``laser_mount`` is given. When the laser poses are a
+    localisation apart from the odometry, their difference from it is not the mount (it holds
+    the map's offset from the odometry's frame) and the log says nothing else of it: the
+    laser is taken to sit at the robot's origin, so the robot's recorded pose is the laser's,
+    in the map's frame.
     """
     log = read_carmen(path, strict=strict)
     if stats is not None:
@@ -110,12 +114,13 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
             truth.add(r.time, r.pose)
         elif isinstance(r, OdomRecord):
             odom.add(r.time, r.pose)
+    map_frame = not laser_poses_are_odometry(log)
     out = []
     for r in log.scans():
         robot_odom = r.odom_pose if r.odom_pose is not None else odom.at(r.time)
         if laser_mount is not None:
             mount = laser_mount
-        elif r.laser_pose is not None and r.odom_pose is not None:
+        elif r.laser_pose is not None and r.odom_pose is not None and not map_frame:
             mount = r.laser_pose.relative_to(r.odom_pose)
         else:
             mount = Pose2D(0.0, 0.0, 0.0)
@@ -123,7 +128,7 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
         out.append(Observation(r.time, r.scan, mount, robot_odom, recorded, truth.at(r.time),
                                sensor=r.laser_pose))
     recorded = any(o.sensor is not None for o in out)
-    has = {"recorded": recorded, "map_frame": recorded and not laser_poses_are_odometry(log),
+    has = {"recorded": recorded, "map_frame": recorded and map_frame,
            "odometry": any(o.odom is not None for o in out), "truth": len(truth) > 0}
     return out, has
 
@@ -197,7 +202,8 @@ def bag_poses(path, *, odom_topic=None, pose_topic=None, truth_topic=None, map_f
             o = tree.lookup(odom_frame, base_frame, r.time)
             if o is not None:
                 tree.add(TransformRecord(r.time, map_frame, odom_frame,
-                                         r.pose.compose(o.inverse())), hold_after=math.inf)
+                                         r.pose.compose(o.inverse())), hold_after=math.inf,
+                         steps=True)
     return BagPoses(tree, map_frame, odom_frame, base_frame, amcl, truth)
 
 

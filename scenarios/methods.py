@@ -42,11 +42,12 @@ mapping has none (the hybrid has the paper's, since the paper's updater runs ins
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
 from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D,
-                     PoseVerdict, Scan)
+                     PoseVerdict, Scan, Verdict)
 from gridmap.suggest import did_you_mean
 
 # The methods, the paper's first (the default).
@@ -235,8 +236,11 @@ class HybridMethod(MapOutput):
         from gridmap.mapping import LogOddsMapper, LogOddsParams
         from updater import MapUpdater
 
+        if isinstance(radius, bool) or not isinstance(radius, (int, float)) \
+                or not 0 < radius <= 5.0:
+            raise MethodError(f"hybrid: radius must be a number in (0, 5] m, got {radius!r}")
         self.paper = MapUpdater(reference, config)
-        self.config = config
+        self.config = self.paper.config
         self.radius = float(radius)
         self.mapper = LogOddsMapper(reference, LogOddsParams(hit_guard=1))
         _start_from(self.mapper, reference.data)
@@ -255,17 +259,25 @@ class HybridMethod(MapOutput):
 
         def check() -> PoseVerdict:
             verdict = pose_check()
-            if isinstance(verdict, PoseVerdict) and verdict.sensor_pose is not None:
+            if isinstance(verdict, PoseVerdict) and verdict.verdict is Verdict.REFINED:
                 used.append(verdict.sensor_pose)
             return verdict
 
         report = self.paper.process(scan, sensor_pose, odometry,
                                     None if pose_check is None else check)
         if report.status is ScanStatus.PROCESSED:
-            self.mapper.add_scan(scan, used[-1])
+            self.mapper.add_scan(self._within_range(scan), used[-1])
             self._mark_hits(scan, used[-1], report.verdicts == BEAM_CHANGE)
             self._cache = None
         return report
+
+    def _within_range(self, scan: Scan) -> Scan:
+        """The scan with the beams the paper's updater takes as invalid (at or beyond
+        ``max_range``) made invalid for the evidence too."""
+        far = scan.ranges >= min(self.config.max_range, scan.range_max)
+        if not np.any(far):
+            return scan
+        return replace(scan, ranges=np.where(far, np.float32(np.nan), scan.ranges))
 
     def _mark_hits(self, scan: Scan, pose: Pose2D, beams: np.ndarray) -> None:
         r = scan.ranges[beams].astype(np.float64)
@@ -298,9 +310,10 @@ class HybridMethod(MapOutput):
         return self.paper.stats
 
     def state_bytes(self) -> int:
-        # the paper's state, the float32 log-odds and int32 scan stamps, the detected hits
+        # the paper's state, the float32 log-odds and int32 scan stamps, the detected hits,
+        # the output kept between scans
         return int(self.paper.state_bytes() + 2 * self.mapper.logodds.nbytes
-                   + self._detected.nbytes)
+                   + self._detected.nbytes + self._ref.nbytes)
 
 
 def _start_from(mapper, reference: np.ndarray) -> None:

@@ -88,8 +88,8 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
     (``localization.smoothing.PoseSmoother``; 0: used as recorded). ``trajectory_path``: the
     robot pose of each scan the update was given, as it was placed (smoothed, and the pose
     check's refinement where it refined; scans it refused and scans withheld while the
-    localiser was not tracking are left out), in TUM format. Returns a summary: counts, pose source, what was skipped, how the localiser
-    fared, cells changed, wall time."""
+    localiser was not tracking are left out), in TUM format. No ``updater_config``: the robot's
+    defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``). Returns a summary for people."""
     from gridmap import load_map
 
     wall0 = _time.perf_counter()
@@ -339,9 +339,9 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
 def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
     """A fresh updater on ``grid`` (with ``config``, else with the robot's defaults,
     ``robot_config.ROBOT_UPDATER_DEFAULTS``), or the one saved in ``state_path`` when that
-    exists. A state holds its reference map whole, which is its fingerprint: it is refused for any other
-    map, and a configuration given with it must be the one it was made with (its buffers
-    follow that configuration)."""
+    exists. A state holds its reference map whole, which is its fingerprint: it is refused for
+    any other map, and a configuration given with it must be the one it was made with (its
+    buffers follow that configuration)."""
     from updater import MapUpdater, UpdaterConfig
 
     from .robot_config import ROBOT_UPDATER_DEFAULTS

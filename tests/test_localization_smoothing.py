@@ -79,6 +79,34 @@ def test_a_relocalisation_restarts_the_window_and_is_used_at_once():
     assert smoother.restarts == 1
 
 
+def test_a_pose_that_is_not_finite_passes_and_leaves_the_window_alone():
+    rng = np.random.default_rng(6)
+    smoother, used = PoseSmoother(), []
+    for k, (t, true, odom) in enumerate(drive(seconds=6.0)):
+        recorded = Pose2D(true.x + rng.normal(0, 0.02), true.y + rng.normal(0, 0.02),
+                          true.theta + rng.normal(0, 0.008))
+        if k == 30:
+            recorded = Pose2D(math.nan, true.y, true.theta)
+        out = smoother(t, recorded, odom)
+        used.append(out)
+        if k == 30:
+            assert out is recorded
+    assert all(p.is_finite() for k, p in enumerate(used) if k != 30)
+    assert smoother.smoothed > 40
+
+
+def test_time_going_back_starts_the_window_afresh():
+    """A new pass over a log, or a new session, starts at an earlier time: the poses of the
+    last one are no longer in the window."""
+    smoother = PoseSmoother()
+    rng = np.random.default_rng(7)
+    for t, true, odom in drive(seconds=5.0):
+        smoother(t, Pose2D(true.x + rng.normal(0, 0.02), true.y, true.theta), odom)
+    far = Pose2D(50.0, 50.0, 1.0)
+    assert smoother(0.0, far, Pose2D(0.0, 0.0, 0.0)) == far        # nothing to smooth with
+    assert smoother.restarts == 0
+
+
 def test_without_a_pose_or_with_no_window_the_recorded_pose_is_used():
     odom = Pose2D(0.0, 0.0, 0.0)
     assert PoseSmoother(0.0)(1.0, Pose2D(1.0, 2.0, 0.1), odom) == Pose2D(1.0, 2.0, 0.1)

@@ -5,7 +5,7 @@ times, at least 90 % get a known state (free, or occupied within a cell of an oc
 agreeing with a map of the whole place, and no occupied cell of the map is freed.
 
 ``mapupdate update`` grows the map by default (``robot_config.ROBOT_UPDATER_DEFAULTS``); the
-updater's own defaults, the paper's, do not (``UpdaterConfig.grow_into_unknown``). Two places:
+updater's own defaults do not (``UpdaterConfig.grow_into_unknown``). Two places:
 the synthetic hall of tests/synthetic_hall.py with its top right bay unknown in the
 map and entered by the route; and the Intel Research Lab log (../shared/data) with a map from
 its first 40 % of scans, updated with the rest. Run with ``-s`` to print the figures.
@@ -36,7 +36,7 @@ except ImportError:  # tests collected as a package
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 SEEN = 7           # observations that make a formerly unknown cell count
 MAX_RANGE = 18.0   # [m] the updater's
-PAPER = UpdaterConfig()       # the paper's defaults: no growth into the unknown
+PAPER = UpdaterConfig()       # the updater's own defaults: no growth into the unknown
 
 
 def grow(mask: np.ndarray) -> np.ndarray:
@@ -105,10 +105,10 @@ def bay(tmp_path_factory):
     counts = observed(before, placed)
     g = grown(before, load_map(d / "grown.yaml"), whole, counts)
     report("hall with an unknown bay", s, g)
-    update_from_log(d / "bay.yaml", d / "bay.bag", d / "paper.yaml", progress=False,
-                    updater_config=PAPER)
+    plain = update_from_log(d / "bay.yaml", d / "bay.bag", d / "paper.yaml", progress=False,
+                            updater_config=PAPER)
     g["paper"] = grown(before, load_map(d / "paper.yaml"), whole, counts)
-    report("  the same with the paper's defaults", s, g["paper"])
+    report("  the same with the updater's own defaults", plain, g["paper"])
     return s, g
 
 
@@ -124,7 +124,7 @@ def test_the_map_grows_into_the_bay_and_frees_nothing_it_had(bay):
     assert g["freed"] == 0
 
 
-def test_with_the_papers_defaults_the_bay_gets_no_surface(bay):
+def test_with_the_updaters_own_defaults_the_bay_gets_no_surface(bay):
     """The paper's removed-obstacle walks free the unknown cells that beams looking into the
     bay see through (they are detected changes), but its new-obstacle rule draws nothing next
     to unknown cells, so the bay's walls and objects stay unknown; the growth draws them."""

@@ -142,6 +142,36 @@ def test_amcl_pose_without_map_odom_tf(world, tmp_path):
     assert differ <= 2  # the same poses up to rounding in the composition
 
 
+def test_amcl_pose_now_and_then_holds_until_the_next_as_amcl_s_tf_would(world, tmp_path):
+    """/amcl_pose at every fourth scan, each off by up to 2 cm / 0.6 deg (a filter update),
+    and no map -> odom tf: the map -> odom it gives holds until the next pose, as amcl's tf
+    does, so the poses follow the odometry in between, are not taken for jitter (nothing
+    smoothed) and place the scans where a bag with that tf at every scan places them."""
+    d, steps = world
+    rng = np.random.default_rng(8)
+    held, with_tf, only_pose = None, [], []
+    for k, (t, true, odom, scan) in enumerate(steps):
+        common = [OdomRecord(t, odom), TransformRecord(t, "odom", "base_link", odom),
+                  ScanRecord(t, scan)]
+        if k % 4 == 0:
+            estimate = true.compose(Pose2D(rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02),
+                                           rng.uniform(-0.01, 0.01)))
+            held = estimate.compose(odom.inverse())
+            only_pose.append(PoseRecord(t, estimate, covariance=np.diag([0.01, 0.01, 0.003])))
+        with_tf += common + [TransformRecord(t, "map", "odom", held)]
+        only_pose += common
+    mount = TransformRecord(steps[0][0], "base_link", "laser", MOUNT, static=True)
+    write_bag(tmp_path / "tf.bag", [mount] + with_tf, "ros1")
+    write_bag(tmp_path / "pose.bag", [mount] + only_pose, "ros1")
+    out = {}
+    for name in ("tf", "pose"):
+        s = update_from_log(d / "map.yaml", tmp_path / f"{name}.bag", tmp_path / f"{name}.yaml",
+                            updater_config=NO_GATING, progress=False)
+        assert s["pose_source"] == "recorded" and s["smoothing"]["scans_smoothed"] == 0
+        out[name] = load_map(tmp_path / f"{name}.yaml").data
+    assert int((out["tf"] != out["pose"]).sum()) <= 2     # rounding in the composition
+
+
 def test_truth_and_localizer_sources(world, tmp_path):
     d, steps = world
     s = update_from_log(d / "map.yaml", d / "s2", tmp_path / "t.yaml", pose_source="truth",
@@ -225,6 +255,34 @@ def test_carmen_log_replay(world, tmp_path):
     for rec in read_carmen(log).scans():
         upd.process(rec.scan, rec.laser_pose, odometry=rec.odom_pose)
     np.testing.assert_array_equal(load_map(tmp_path / "c.yaml").data, upd.updated_map().data)
+
+
+def test_carmen_corrected_poses_beside_raw_odometry_are_the_map_frame_poses(world, tmp_path):
+    """Laser poses of a localisation (the map's frame, jittering by 1 cm / 0.5 deg) beside the
+    raw odometry (its own frame, drifting): their difference is no mount, so the laser is taken
+    at the robot's origin; the trajectory written is the map-frame poses, smoothed with the
+    odometry, not the odometry."""
+    _, steps = world
+    rng = np.random.default_rng(5)
+    lines, truth = [], {}
+    for t, true, odom, scan in steps:
+        sensor = true.compose(MOUNT)
+        laser = Pose2D(sensor.x + rng.normal(0, 0.01), sensor.y + rng.normal(0, 0.01),
+                       sensor.theta + rng.normal(0, math.radians(0.5)))
+        r = np.where(np.isfinite(scan.ranges), scan.ranges, 81.83)[45:225]
+        lines.append("FLASER 180 " + " ".join(f"{v:.3f}" for v in r)
+                     + f" {laser.x:.6f} {laser.y:.6f} {laser.theta:.6f}"
+                     f" {odom.x:.6f} {odom.y:.6f} {odom.theta:.6f} {t:.3f} h {t:.3f}")
+        truth[round(t, 3)] = sensor
+    log = tmp_path / "corrected.log"
+    log.write_text("\n".join(lines) + "\n")
+    s = update_from_log(world[0] / "map.yaml", log, tmp_path / "c.yaml", progress=False,
+                        trajectory_path=tmp_path / "c.tum")
+    assert s["pose_source"] == "recorded" and s["smoothing"]["scans_smoothed"] > 30
+    rows = np.loadtxt(tmp_path / "c.tum")
+    errors = [math.hypot(x - truth[round(t, 3)].x, y - truth[round(t, 3)].y)
+              for t, x, y, *_ in rows]
+    assert len(errors) > 40 and max(errors) < 0.05 and float(np.median(errors)) < 0.02
 
 
 def test_detect_format(world, tmp_path):

@@ -210,3 +210,25 @@ def test_hybrid_draws_more_of_a_moved_box_than_the_paper_and_nothing_else():
     assert paper["new_drawn"] < 0.45 and hybrid["new_drawn"] >= paper["new_drawn"] + 0.2, out
     assert hybrid["old_freed"] >= paper["old_freed"], out
     assert hybrid["false"] <= 8 and hybrid["walls_freed"] == 0, out
+
+
+def test_hybrid_maps_asked_for_at_every_scan_end_as_one_asked_for_at_the_end(maps):
+    """Its output is worked out when asked and kept until the next processed scan: asking for
+    it (and scribbling on the copy it returns) at every scan changes nothing."""
+    shapes = world.room_walls() + [ADDED]
+    pipeline = RobotPipeline(make_method("hybrid", reference()))
+    for true, noisy, t in world.Drive(seconds=40.0, seed=1).steps():
+        pipeline.step(world.full_scan(shapes, true, t), world.Pose2D(0.0, 0.0, 0.0),
+                      odometry=true, pose=noisy)
+        pipeline.updater.updated_map().data[:] = UNKNOWN
+        assert pipeline.updater.n_changed == int((pipeline.updater.current()
+                                                  != reference().data).sum())
+    assert np.array_equal(pipeline.updater.updated_map().data, maps["hybrid"][0])
+
+
+@pytest.mark.parametrize("radius", [0.0, -0.1, float("nan"), 6.0, True])
+def test_hybrid_refuses_a_radius_out_of_range(radius):
+    from scenarios.methods import HybridMethod
+
+    with pytest.raises(MethodError, match=r"hybrid: radius must be a number in \(0, 5\] m"):
+        HybridMethod(reference(), None, radius=radius)

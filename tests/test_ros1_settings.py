@@ -93,8 +93,10 @@ def test_the_node_smooths_recorded_poses_as_mapupdate_update_does_by_default():
 
 
 def test_the_node_grows_the_map_into_the_unknown_as_update_does_unless_configured():
-    """Without an ``updater`` section the robot's defaults (the paper's, with the growth into
-    the unknown); a section given is the updater's whole configuration, as in the YAML."""
+    """Without an ``updater`` section in a ``--config`` file the base is the robot's defaults
+    (the updater's, with the growth into the unknown), which the node's parameters override
+    key by key; a file's section is the updater's whole configuration, as for ``mapupdate
+    update`` (the class's defaults for the keys it leaves out)."""
     _, updater, _ = node_settings({})
     assert updater.grow_into_unknown is True
     assert node_settings({"updater": {"threshold": 6}})[1].grow_into_unknown is True

@@ -38,12 +38,13 @@ def test_replay_of_recorded_localisation_gives_the_in_process_map(bag_run, fmt, 
     root, ros1, ros2 = bag_run
     bag = (ros1 if fmt == "ros1" else ros2).paths["W2"]
     out = tmp_path / "replayed.yaml"
-    # the run asked the pose check (the runner's default), so the replay asks it too; the run
-    # placed each scan at its localiser's pose as it was, so the replay does not smooth them;
-    # and the run's updater has the paper's defaults, not update's (which grow the map)
+    # the run asked the pose check (the runner's default), so the replay asks it too; the
+    # run's updater has the class's defaults, not update's (which grow the map); and the
+    # localiser's map -> odom moves only at its filter updates, so update smooths nothing
     summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", bag, out, progress=False,
-                              pose_check=True, smooth_window=0.0, updater_config=UpdaterConfig())
+                              pose_check=True, updater_config=UpdaterConfig())
     assert summary["pose_source"] == "recorded" and summary["scans_refused_by_pose_check"] > 0
+    assert summary["smoothing"] == {"window_s": 2.0, "scans_smoothed": 0, "restarts": 0}
     in_process = load_map(root / "run" / "maps" / "M_W2.yaml")
     replayed = load_map(out)
     assert summary["cells_freed"] + summary["cells_occupied"] > 200

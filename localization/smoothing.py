@@ -71,7 +71,8 @@ class PoseSmoother:
                 raise LocalizationError(f"pose smoothing: {name} must be a number in "
                                         f"[0, {top:g}], got {value!r}")
         self.window, self.jump, self.jump_deg = float(window), float(jump), float(jump_deg)
-        self._past: list = []          # (time, recorded, odometry, moved against the odometry)
+        # (time, recorded, odometry, innovation against the previous record, or None)
+        self._past: list = []
         self.restarts = 0              # windows restarted by a jump of the localisation
         self.smoothed = 0              # scans whose pose was smoothed
 
@@ -82,11 +83,11 @@ class PoseSmoother:
                 not (recorded.is_finite() and odom.is_finite() and math.isfinite(time)):
             return recorded
         self._past = [p for p in self._past if time - self.window < p[0] <= time]
-        moved = bool(self._past) and _moved(_innovation(self._past[-1], recorded, odom))
+        step = _innovation(self._past[-1], recorded, odom) if self._past else None
         if self._past and self._jumped(self._predict(odom), recorded):
             self._past = []
             self.restarts += 1
-        self._past.append((time, recorded, odom, moved))
+        self._past.append((time, recorded, odom, step))
         if not self._jitters():
             return recorded
         self.smoothed += 1
@@ -96,10 +97,11 @@ class PoseSmoother:
         """Whether the window's poses jitter against the odometry (module docstring)."""
         past = self._past
         n = len(past)
-        if n < MIN_POSES or sum(p[3] for p in past) < JITTER_SHARE * n:
+        moved = sum(p[3] is not None and _moved(p[3]) for p in past)
+        if n < MIN_POSES or moved < JITTER_SHARE * n:
             return False
+        near = [p[3] for p in past[1:]]        # each against the one before it
         lag = n // 2
-        near = [_innovation(past[i], past[i + 1][1], past[i + 1][2]) for i in range(n - 1)]
         far = [_innovation(past[i], past[i + lag][1], past[i + lag][2]) for i in range(n - lag)]
         for k in (0, 1):        # position [m^2], heading [rad^2]
             one = float(np.mean([d[k] for d in near]))

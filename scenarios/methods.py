@@ -246,6 +246,7 @@ class HybridMethod(MapOutput):
         _start_from(self.mapper, reference.data)
         self._ref = reference.data.copy()
         self._res, self._origin = reference.resolution, reference.origin
+        self._frame = OccupancyGrid(self._ref, self._res, self._origin)   # for conversions
         self._detected = np.zeros(self._ref.shape, bool)   # hit cells of detected changes
         self._cache: np.ndarray | None = None
 
@@ -282,15 +283,14 @@ class HybridMethod(MapOutput):
     def _mark_hits(self, scan: Scan, pose: Pose2D, beams: np.ndarray) -> None:
         r = scan.ranges[beams].astype(np.float64)
         a = scan.angles()[beams] + pose.theta
-        col = np.floor((pose.x + r * np.cos(a) - self._origin[0]) / self._res).astype(np.int64)
-        row = np.floor((pose.y + r * np.sin(a) - self._origin[1]) / self._res).astype(np.int64)
-        h, w = self._ref.shape
-        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        row, col = self._frame.world_to_cell(pose.x + r * np.cos(a), pose.y + r * np.sin(a))
+        inside = self._frame.contains(row, col)
         self._detected[row[inside], col[inside]] = True
 
     def current(self) -> np.ndarray:
         """The map as it stands (computed when a scan was processed since the last call)."""
         if self._cache is None:
+            from evaluation.scores import near
             from gridmap.distance import distance_to_occupied
 
             paper = self.paper.updated_map().data
@@ -300,7 +300,8 @@ class HybridMethod(MapOutput):
             where = distance_to_occupied(marks, 2 * self.radius) <= self.radius + 1e-6
             what = self.mapper.to_grid().data
             take = where & (what != UNKNOWN) & (self._ref != UNKNOWN)
-            take &= ~((what == FREE) & (paper == OCCUPIED) & _beside(what == OCCUPIED))
+            # (the cell itself is free in the evidence, so "near" is its 8 neighbours)
+            take &= ~((what == FREE) & (paper == OCCUPIED) & near(what == OCCUPIED))
             paper[take] = what[take]
             self._cache = paper
         return self._cache
@@ -323,13 +324,3 @@ def _start_from(mapper, reference: np.ndarray) -> None:
     mapper.logodds[reference == OCCUPIED] = p.clamp_max
     mapper.logodds[reference == FREE] = p.clamp_min
 
-
-def _beside(mask: np.ndarray) -> np.ndarray:
-    """Cells with an 8-neighbour in ``mask``."""
-    p = np.pad(mask, 1)
-    out = np.zeros_like(mask)
-    for dr in (-1, 0, 1):
-        for dc in (-1, 0, 1):
-            if dr or dc:
-                out |= p[1 + dr:p.shape[0] - 1 + dr, 1 + dc:p.shape[1] - 1 + dc]
-    return out

@@ -631,9 +631,11 @@ def test_fill_gaps_step_against_reference(seed):
 
 
 # --- buffers and decision ---------------------------------------------------------------------
-def ref_decide_all(hist, data, mask, threshold, support):
+def ref_decide_all(hist, data, mask, threshold, support, seen=None, few=0):
     n = np.vectorize(lambda v: ref_popcount(int(v) & mask))(hist)
     changed = n >= threshold
+    if few:
+        changed |= (n >= few) & (seen < threshold) & (n == seen)
     if support:
         occ = data != FREE
         strong = n >= threshold
@@ -660,7 +662,10 @@ def test_push_flags_against_reference():
     unchanged = rng.choice(500, 200, replace=False).astype(np.int32)
     ch_marks, un_marks = np.full(63, 255, np.uint8), np.full(63, 255, np.uint8)
     moved = np.zeros(280, np.int32)
-    n = K.push_flags(hist, changed, unchanged, 0x3FF, 7, ch_marks, un_marks, moved)
+    seen = np.zeros(500, np.uint8)
+    n = K.push_flags(hist, seen, changed, unchanged, 0x3FF, 7, 0, ch_marks, un_marks, moved)
+    flags = np.bincount(np.concatenate([changed, unchanged]), minlength=500)
+    assert (seen == flags).all()
     expect = before.astype(int)
     log = []
     for idx, flag in [(i, 1) for i in changed] + [(i, 0) for i in unchanged]:
@@ -675,11 +680,13 @@ def test_push_flags_against_reference():
 
 
 @pytest.mark.parametrize("support", [False, True])
-def test_decide_incremental_equals_full_map(support):
-    rng = np.random.default_rng(7 + support)
+@pytest.mark.parametrize("few", [0, 3])
+def test_decide_incremental_equals_full_map(support, few):
+    rng = np.random.default_rng(7 + support + 10 * few)
     data = random_map(rng, h=30, w=30, p_occ=0.3, p_unk=0.1)
     flat = data.reshape(-1)
     hist = np.zeros(data.size, np.uint16)
+    seen = np.zeros(data.size, np.uint8)
     decided = np.zeros((data.size + 7) // 8, np.uint8)
     marks = np.zeros_like(decided), np.zeros_like(decided)
     moved = np.zeros(2000, np.int32)
@@ -693,15 +700,16 @@ def test_decide_incremental_equals_full_map(support):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
-        n = K.push_flags(hist, ch, un, 0x3FF, 7, marks[0], marks[1], moved)
-        count += K.decide(hist, flat, decided, moved[:n], 30, 0x3FF, 7, support)
-        expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support)
+        n = K.push_flags(hist, seen, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved)
+        count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support)
+        expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support,
+                                seen.reshape(30, 30), few)
         got = np.unpackbits(decided, bitorder="little")[:900].reshape(30, 30).astype(bool)
         assert (got == expect).all() and count == expect.sum()
         peak = max(peak, count)
     assert peak > count > 0           # cells changed, and some changed back
     full = np.zeros_like(decided)
-    assert K.decide_all(hist, flat, full, 30, 0x3FF, 7, support) == count
+    assert K.decide_all(hist, seen, flat, full, 30, 0x3FF, 7, few, support) == count
     assert (full == decided).all()
 
 
@@ -713,11 +721,32 @@ def test_neighbour_support_rule():
     for j in (6, 7, 8):
         hist[j] = 0b1111111
     decided = np.zeros(4, np.uint8)
-    assert K.decide_cell(hist, data.reshape(-1), decided, 12, 5, 0x3FF, 7, True) == 1
+    seen = np.full(25, 255, np.uint8)
+    assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, True) == 1
     data[1, 1] = OCC         # one supporter of another state in M: 4 + 2 < 7
     decided[:] = 0
-    assert K.decide_cell(hist, data.reshape(-1), decided, 12, 5, 0x3FF, 7, True) == 0
-    assert K.decide_cell(hist, data.reshape(-1), decided, 12, 5, 0x3FF, 7, False) == 0
+    assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, True) == 0
+    assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, False) == 0
+
+
+def test_unanimous_rule_for_few_observations():
+    # A cell flagged changed by each of the 4 scans that saw it changes with unanimous_min 3 or
+    # 4, not 5; one unchanged flag among its 5 undoes it; at 7 flags the threshold rules.
+    data = np.zeros((3, 3), np.int8)
+    flat = data.reshape(-1)
+
+    def decide(bits, n_seen, few):
+        hist = np.zeros(9, np.uint16)
+        hist[4] = bits
+        seen = np.zeros(9, np.uint8)
+        seen[4] = n_seen
+        return K.decide_cell(hist, seen, flat, np.zeros(2, np.uint8), 4, 3, 0x3FF, 7, few,
+                             False)
+
+    assert decide(0b1111, 4, 3) == 1 and decide(0b1111, 4, 4) == 1
+    assert decide(0b1111, 4, 5) == 0 and decide(0b1111, 4, 0) == 0
+    assert decide(0b11110, 5, 3) == 0
+    assert decide(0b1111110, 7, 3) == 0 and decide(0b1111111, 7, 0) == 1
 
 
 # --- output and last check --------------------------------------------------------------------

@@ -540,11 +540,14 @@ def apply_drawn(drawn, out):
 
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
-def push_flags(hist, changed, unchanged, mask, threshold, ch_marks, un_marks, out_moved):
+def push_flags(hist, seen, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
+               out_moved):
     """Shift the scan's flags into the buffers, changed flags first:
-    ``hist = ((hist << 1) | flag) & mask``, and clear the scan's marks. ``out_moved`` gets each
-    cell whose count n_c changed, as ``idx``, or as ``-1 - idx`` when n_c crossed the
-    threshold (its neighbours' support changed too). Returns the count written."""
+    ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255) and
+    clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
+    rule for few observations, ``few`` > 0, whose observations are still below the threshold),
+    as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
+    changed too). Returns the count written."""
     n = 0
     n_changed = changed.shape[0]
     for k in range(n_changed + unchanged.shape[0]):
@@ -554,6 +557,8 @@ def push_flags(hist, changed, unchanged, mask, threshold, ch_marks, un_marks, ou
         else:
             idx, flag = unchanged[k - n_changed], 0
             un_marks[idx >> 3] = 0
+        if seen[idx] < 255:
+            seen[idx] += 1
         old = hist[idx]
         if old == 0 and flag == 0:
             continue            # an unchanged flag into an all-unchanged buffer: no change
@@ -564,17 +569,23 @@ def push_flags(hist, changed, unchanged, mask, threshold, ch_marks, un_marks, ou
             crossed = (p_old >= threshold) != (p_new >= threshold)
             out_moved[n] = -1 - idx if crossed else idx
             n += 1
+        elif few > 0 and seen[idx] <= threshold:
+            out_moved[n] = idx
+            n += 1
     return n
 
 
 @njit(cache=True)
-def decide_cell(hist, ref, decided, idx, width, mask, threshold, support):
+def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support):
     """Apply the decision rule to cell ``idx`` (flat arrays) and update its decided bit: changed
-    when n_c >= T, or, with ``support``, when n_c plus its 8-neighbours of the same two-state
-    (free / occupied-or-unknown) in ``ref`` with n >= T reaches T. Returns +1, -1 or 0, the
-    change of the number of changed cells."""
+    when n_c >= T; or, with ``few`` > 0, when the cell was observed fewer than T times, at least
+    ``few`` times, and every flag it got says changed; or, with ``support``, when n_c plus its
+    8-neighbours of the same two-state (free / occupied-or-unknown) in ``ref`` with n >= T
+    reaches T. Returns +1, -1 or 0, the change of the number of changed cells."""
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
+    if not changed and few > 0:
+        changed = n >= few and seen[idx] < threshold and n == seen[idx]
     if not changed and support:
         height = ref.shape[0] // width
         row, col = idx // width, idx % width
@@ -592,32 +603,32 @@ def decide_cell(hist, ref, decided, idx, width, mask, threshold, support):
 
 
 @njit(cache=True)
-def decide(hist, ref, decided, moved, width, mask, threshold, support):
-    """Re-decide every cell whose own count moved, and the 8-neighbours of those whose count
+def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support):
+    """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
     crossed the threshold: no other cell's inputs changed. Returns the change of the number of
     changed cells."""
     height = ref.shape[0] // width
     delta = 0
     for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
-        delta += decide_cell(hist, ref, decided, idx, width, mask, threshold, support)
+        delta += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
         if moved[k] >= 0 or not support:
             continue
         row, col = idx // width, idx % width
         for rr in range(max(row - 1, 0), min(row + 2, height)):
             for cc in range(max(col - 1, 0), min(col + 2, width)):
                 if rr != row or cc != col:
-                    delta += decide_cell(hist, ref, decided, rr * width + cc, width, mask,
-                                         threshold, support)
+                    delta += decide_cell(hist, seen, ref, decided, rr * width + cc, width, mask,
+                                         threshold, few, support)
     return delta
 
 
 @njit(cache=True)
-def decide_all(hist, ref, decided, width, mask, threshold, support):
+def decide_all(hist, seen, ref, decided, width, mask, threshold, few, support):
     """The decision rule over the whole map (on loading a saved state, and in tests)."""
     total = 0
     for idx in range(ref.shape[0]):
-        total += decide_cell(hist, ref, decided, idx, width, mask, threshold, support)
+        total += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
     return total
 
 

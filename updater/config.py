@@ -38,6 +38,7 @@ BOUNDS = {
     "seen_surface_radius": (0.0, 1.0), "fill_gaps_clearance": (0.0, 1.0),
     "fill_gaps_free_margin": (0.0, 5.0), "n_skip": (0, 100), "free_fraction": (1e-3, 1.0),
     "buffer_size": (1, MAX_BUFFER_SIZE), "threshold": (1, MAX_BUFFER_SIZE),
+    "unanimous_min": (0, MAX_BUFFER_SIZE),
     "last_check_max_area": (0.0, 10_000.0),
 }
 
@@ -103,6 +104,10 @@ class UpdaterConfig:
     buffer_size: int = 10                    # N_b flags per cell
     threshold: int = 7                       # T: changed when n_c (+ support) reaches this
     neighbour_support: bool = True           # count 8-neighbours of the same state with n >= T
+    # Not in the paper: a cell observed fewer than T times in all (a corridor seen in passing,
+    # a recording that keeps a scan a metre) is changed when every one of its flags says
+    # changed and there are at least this many. A later contrary flag undoes it. 0: off.
+    unanimous_min: int = 0
     # --- Last check ---------------------------------------------------------------------------
     last_check: bool = True
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed

@@ -7,6 +7,7 @@ array              bytes per cell  what
 =================  ==============  ==========================================================
 reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
 buffers            2               uint16 shift registers of the last N_b flags
+flag counts        1               uint8: flags a cell ever got (saturating at 255)
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan
@@ -123,6 +124,7 @@ class MapUpdater:
         self._res = reference_map.resolution
         self._origin = reference_map.origin
         self._hist = np.zeros(self._ref.shape, np.uint16)
+        self._seen = np.zeros(self._ref.shape, np.uint8)    # flags ever pushed, saturating
         n_bytes = (self._ref.size + 7) // 8
         self._decided = np.zeros(n_bytes, np.uint8)
         self._ch_marks = np.zeros(n_bytes, np.uint8)
@@ -204,8 +206,10 @@ class MapUpdater:
         if grow:
             n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
         hist = self._hist.reshape(-1)
-        n_moved = steps.push_flags(hist, n_ch, n_un, cfg, self._ch_marks, self._un_marks, ws)
-        self._n_changed += steps.decide(hist, ref.reshape(-1), self._decided, n_moved,
+        seen = self._seen.reshape(-1)
+        n_moved = steps.push_flags(hist, seen, n_ch, n_un, cfg, self._ch_marks, self._un_marks,
+                                   ws)
+        self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
                                         ref.shape[1], cfg, ws)
         if grow:
             self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
@@ -292,6 +296,19 @@ class MapUpdater:
         """n_c, the changed flags in each cell's buffer, as a uint8 (H, W) array."""
         return np.bitwise_count(self._hist & steps.buffer_mask(self.config)).astype(np.uint8)
 
+    def evidence_summary(self) -> dict:
+        """Cells whose buffers hold evidence of change that has not (or not yet) changed them:
+        ``pending_cells`` (at least one changed flag among the last N_b, not changed in the
+        output), of which ``pending_few_observations`` were observed fewer than T times in
+        all and ``pending_outvoted`` more often (their unchanged flags outweigh the changed
+        ones). O(map); for summaries, not per scan."""
+        bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
+        pending = (self._hist.reshape(-1) != 0) & (bits == 0)
+        few = pending & (self._seen.reshape(-1) < self.config.threshold)
+        n_pending, n_few = int(pending.sum()), int(few.sum())
+        return {"pending_cells": n_pending, "pending_few_observations": n_few,
+                "pending_outvoted": n_pending - n_few}
+
     def enclosed_unknown(self) -> np.ndarray:
         """Boolean (H, W) mask of the cells the last check may close."""
         bits = np.unpackbits(self._enclosed, bitorder="little")[:self._ref.size]
@@ -299,7 +316,7 @@ class MapUpdater:
 
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
-        arrays = (self._ref, self._hist, self._decided, self._ch_marks, self._un_marks,
+        arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks, self._un_marks,
                   self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
         return sum(a.nbytes for a in arrays) + self._ws.nbytes()
 
@@ -313,15 +330,22 @@ class MapUpdater:
                 "gate": self._gate.state(), "counts": self._counts}
         buf = io.BytesIO()
         np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
-                            hist=self._hist, hits=self._hitbuf)
+                            hist=self._hist, hits=self._hitbuf, seen=self._seen)
         try:
             write_atomically(path, buf.getvalue())
         except OSError as e:
             raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
 
-    def _restore_buffers(self, path, hist: np.ndarray, hits: np.ndarray | None) -> None:
+    def _restore_buffers(self, path, hist: np.ndarray, hits: np.ndarray | None,
+                         seen: np.ndarray | None = None) -> None:
         """Take saved buffers (refused unless they fit the map and the configuration) and
-        decide every cell from them."""
+        decide every cell from them. A state saved before the flags were counted gives each
+        cell with flags the most observations (so none of them is decided by few)."""
+        if seen is None:
+            seen = np.where(hist != 0, 255, 0).astype(np.uint8)
+        if seen.shape != self._seen.shape or seen.dtype != np.uint8:
+            raise UpdaterError(f"{path}: flag counts do not fit the reference map")
+        self._seen[...] = seen
         mask = np.uint16(steps.buffer_mask(self.config))
         for name, saved, into in (("buffers", hist, self._hist),
                                   ("hit buffers", hits, self._hitbuf)):
@@ -331,7 +355,8 @@ class MapUpdater:
                 raise UpdaterError(f"{path}: {name} do not fit the reference map and config")
             into[...] = saved
         ref = self._ref.reshape(-1)
-        self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1), ref,
+        self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
+                                                          self._seen.reshape(-1), ref,
                                                           self._ref.shape[1], self.config)
         if self.config.grow_into_unknown:
             self._n_drawn = int(steps.kernels().decide_drawn(
@@ -351,6 +376,7 @@ class MapUpdater:
                 ref, hist = z["reference"], z["hist"]
                 # states saved before the growth into the unknown have no hit buffers
                 hits = z["hits"] if "hits" in z.files else None
+                seen = z["seen"] if "seen" in z.files else None
         except FileInputError as e:
             raise UpdaterError(str(e)) from None
         # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
@@ -372,7 +398,7 @@ class MapUpdater:
         except (GridError, TypeError, ValueError) as e:
             raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
         updater = cls(grid, config)
-        updater._restore_buffers(path, hist, hits)
+        updater._restore_buffers(path, hist, hits, seen)
         try:
             updater._gate.restore(meta["gate"])
         except (ValueError, TypeError) as e:

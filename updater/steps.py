@@ -407,31 +407,38 @@ def buffer_mask(cfg: UpdaterConfig) -> int:
     return (1 << cfg.buffer_size) - 1
 
 
-def push_flags(hist_flat: np.ndarray, n_changed: int, n_unchanged: int, cfg: UpdaterConfig,
-               ch_marks: np.ndarray, un_marks: np.ndarray, ws: Workspace) -> int:
+def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, n_changed: int, n_unchanged: int,
+               cfg: UpdaterConfig, ch_marks: np.ndarray, un_marks: np.ndarray,
+               ws: Workspace) -> int:
     """Shift the scan's flags into the cells' buffers, changed flags first:
-    ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``. Only flagged cells are touched. Returns
-    the count of entries written to ``ws.moved`` (cells whose count n_c changed)."""
+    ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``, and count them in ``seen_flat`` (flags
+    a cell ever got, saturating at 255). Only flagged cells are touched. Returns the count of
+    entries written to ``ws.moved`` (cells whose decision inputs changed)."""
     ws.for_moved(n_changed + n_unchanged)
-    return kernels().push_flags(hist_flat, ws.changed[:n_changed], ws.unchanged[:n_unchanged],
-                                buffer_mask(cfg), cfg.threshold, ch_marks, un_marks, ws.moved)
+    return kernels().push_flags(hist_flat, seen_flat, ws.changed[:n_changed],
+                                ws.unchanged[:n_unchanged], buffer_mask(cfg), cfg.threshold,
+                                cfg.unanimous_min, ch_marks, un_marks, ws.moved)
 
 
-def decide(hist_flat: np.ndarray, ref_flat: np.ndarray, decided: np.ndarray, n_moved: int,
-           width: int, cfg: UpdaterConfig, ws: Workspace) -> int:
-    """The decision rule (n_c >= T, or n_c plus the 8-neighbours of the same state in M with
+def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+           decided: np.ndarray, n_moved: int, width: int, cfg: UpdaterConfig,
+           ws: Workspace) -> int:
+    """The decision rule (n_c >= T; or, with ``unanimous_min``, every flag of a cell observed
+    fewer than T times says changed; or n_c plus the 8-neighbours of the same state in M with
     n >= T reaches T) for the cells whose inputs changed this scan. Returns the change of the
     number of changed cells."""
-    return kernels().decide(hist_flat, ref_flat, decided, ws.moved[:n_moved], width,
-                            buffer_mask(cfg), cfg.threshold, cfg.neighbour_support)
+    return kernels().decide(hist_flat, seen_flat, ref_flat, decided, ws.moved[:n_moved], width,
+                            buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
+                            cfg.neighbour_support)
 
 
-def decide_all(hist_flat: np.ndarray, ref_flat: np.ndarray, width: int,
+def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,
                cfg: UpdaterConfig) -> tuple[np.ndarray, int]:
     """The decision rule over the whole map: (decided bits, count of changed cells)."""
     decided = np.zeros((ref_flat.size + 7) // 8, np.uint8)
-    count = kernels().decide_all(hist_flat, ref_flat, decided, width, buffer_mask(cfg),
-                                 cfg.threshold, cfg.neighbour_support)
+    count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width,
+                                 buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
+                                 cfg.neighbour_support)
     return decided, int(count)
 
 

@@ -635,7 +635,7 @@ def ref_decide_all(hist, data, mask, threshold, support, seen=None, few=0):
     n = np.vectorize(lambda v: ref_popcount(int(v) & mask))(hist)
     changed = n >= threshold
     if few:
-        changed |= (n >= few) & (seen < threshold) & (n == seen)
+        changed |= (n >= few) & (seen < threshold) & (n == seen) & (data != UNK)
     if support:
         occ = data != FREE
         strong = n >= threshold
@@ -747,6 +747,8 @@ def test_unanimous_rule_for_few_observations():
     assert decide(0b1111, 4, 5) == 0 and decide(0b1111, 4, 0) == 0
     assert decide(0b11110, 5, 3) == 0
     assert decide(0b1111110, 7, 3) == 0 and decide(0b1111111, 7, 0) == 1
+    data[1, 1] = UNK         # an unknown cell of M needs the threshold: its interior may be
+    assert decide(0b1111, 4, 3) == 0     # an unmapped room, not an object
 
 
 # --- output and last check --------------------------------------------------------------------
@@ -827,7 +829,8 @@ def test_apply_changes_against_reference(close):
     enclosed = (data == UNK) & (rng.random(data.shape) < 0.7)
     pack = lambda m: np.packbits(m.reshape(-1), bitorder="little")  # noqa: E731
     out = data.reshape(-1).copy()
-    closed = K.apply_changes(data.reshape(-1), pack(decided), pack(enclosed), 41, close, out)
+    closed = K.apply_changes(data.reshape(-1), pack(decided), pack(enclosed), 41, close,
+                             np.zeros(0, np.uint16), out)
     expect = ref_apply(data, decided, enclosed, close)
     assert (out.reshape(data.shape) == expect).all()
     assert closed == ((expect == OCC) & (data == UNK) & ~decided).sum()

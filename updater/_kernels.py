@@ -15,6 +15,7 @@ from gridmap._kernels import NO_HIT, find_root, first_hit, traverse
 
 FREE = 0
 OCC = 100
+UNK = -1
 # Per-beam verdicts of the classifier.
 INVALID = 0
 UNCHANGED = 1
@@ -585,7 +586,7 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
     if not changed and few > 0:
-        changed = n >= few and seen[idx] < threshold and n == seen[idx]
+        changed = n >= few and seen[idx] < threshold and n == seen[idx] and ref[idx] != UNK
     if not changed and support:
         height = ref.shape[0] // width
         row, col = idx // width, idx % width
@@ -634,11 +635,13 @@ def decide_all(hist, seen, ref, decided, width, mask, threshold, few, support):
 
 # --- output and last check --------------------------------------------------------------------
 @njit(cache=True)
-def apply_changes(ref, decided, enclosed, width, close, out):
+def apply_changes(ref, decided, enclosed, width, close, hist, out):
     """``out`` (a copy of ``ref``, flat) gets the changed cells flipped: free -> occupied,
     occupied or unknown -> free. With ``close``, the last check: each 8-neighbour of a cell
     that became free that lies in an enclosed unknown region of ``ref`` and is itself unchanged
-    (so still unknown) becomes occupied. Returns the count of cells the last check closed."""
+    (so still unknown) becomes occupied, unless ``hist`` (flat buffers, or an empty array)
+    holds a changed flag for it: a cell seen through, if not yet often enough to be freed, is
+    left unknown rather than drawn. Returns the count of cells the last check closed."""
     height = ref.shape[0] // width
     closed = 0
     for b in range(decided.shape[0]):
@@ -654,7 +657,8 @@ def apply_changes(ref, decided, enclosed, width, close, out):
             for rr in range(max(row - 1, 0), min(row + 2, height)):
                 for cc in range(max(col - 1, 0), min(col + 2, width)):
                     j = rr * width + cc
-                    if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCC:
+                    if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCC \
+                            and (hist.shape[0] == 0 or hist[j] == 0):
                         out[j] = OCC
                         closed += 1
     return closed

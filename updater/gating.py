@@ -25,7 +25,10 @@ GATED_INTERVAL = "interval"      # too soon after the last processed scan
 GATED_NO_MOTION = "no motion"    # neither moved nor turned enough since then
 GATED_FAST_TURN = "fast turn"    # idle after a fast turn
 GATED_TIME_BACK = "time went backwards"   # the gate restarts from this scan
+GATED_TURN_VIEWS = "turning in place"     # turned, but as many views as allowed from here
 SKIPPED_OFF_MAP = "sensor off the map"    # not gating: the scan cannot be classified
+# Scans held back as a view already taken: with ``gate_confirm`` their unchanged flags are used.
+CONFIRMING = frozenset({GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS})
 
 # [s] Scan times are floats: 10 Hz stamps such as 0.7 - 0.4 come out 0.29999999999999993, and
 # stamps carried from a ROS clock (1.7e9 s) are rounded to 0.24 us. Intervals are compared with
@@ -33,7 +36,7 @@ SKIPPED_OFF_MAP = "sensor off the map"    # not gating: the scan cannot be class
 TIME_TOLERANCE = 1e-6
 
 _FIELDS = ("source", "last_t", "last_x", "last_y", "last_th", "proc_t", "proc_x", "proc_y",
-           "proc_th", "idle", "idle_t", "travel")
+           "proc_th", "idle", "idle_t", "travel", "turn_views")
 
 
 class Gate:
@@ -54,6 +57,8 @@ class Gate:
         self.idle = False          # shut after a fast turn
         self.idle_t = math.nan     # time of the last fast turn
         self.travel = 0.0          # [m] travelled since then
+        self.turn_views = 0        # scans processed for turning alone since the last move
+        self._by_turn = False      # the scan just let through was for turning alone
 
     def check(self, t: float, pose: Pose2D, from_odometry: bool) -> str:
         """"" when the scan at time ``t`` [s] may be processed, else why not."""
@@ -74,6 +79,7 @@ class Gate:
 
     def mark_processed(self, t: float, pose: Pose2D) -> None:
         self.proc_t, self.proc_x, self.proc_y, self.proc_th = t, pose.x, pose.y, pose.theta
+        self.turn_views = self.turn_views + 1 if self._by_turn else 0
 
     def _sample(self, t, pose):
         self.last_t, self.last_x, self.last_y, self.last_th = t, pose.x, pose.y, pose.theta
@@ -86,7 +92,8 @@ class Gate:
         turn = abs(wrap_angle(pose.theta - self.last_th))
         if self.idle:
             self.travel += math.hypot(pose.x - self.last_x, pose.y - self.last_y)
-        if math.degrees(turn) / dt >= self.config.gate_fast_turn_deg_s:
+        if dt <= self.config.gate_velocity_max_dt \
+                and math.degrees(turn) / dt >= self.config.gate_fast_turn_deg_s:
             self.idle, self.idle_t, self.travel = True, t, 0.0
         self._sample(t, pose)
 
@@ -103,6 +110,9 @@ class Gate:
         moved = math.hypot(pose.x - self.proc_x, pose.y - self.proc_y) >= cfg.gate_min_distance
         turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))
         turned = turn >= cfg.gate_min_rotation_deg
+        self._by_turn = turned and not moved
+        if self._by_turn and cfg.gate_turn_views and self.turn_views >= cfg.gate_turn_views:
+            return GATED_TURN_VIEWS
         return "" if moved or turned else GATED_NO_MOTION
 
     # --- saving and restoring -----------------------------------------------------------------
@@ -110,6 +120,7 @@ class Gate:
         return {name: getattr(self, name) for name in _FIELDS}
 
     def restore(self, state: dict) -> None:
+        state = {"turn_views": 0, **state}     # states saved before the rule had none
         missing = [name for name in _FIELDS if name not in state]
         if missing:
             raise ValueError(f"gate state lacks {missing}")

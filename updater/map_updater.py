@@ -46,7 +46,7 @@ from gridmap.atomic import write_atomically
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
-from .gating import SKIPPED_OFF_MAP, Gate
+from .gating import CONFIRMING, SKIPPED_OFF_MAP, Gate
 
 # Per-beam verdicts (ScanReport.verdicts), the same codes as the kernels use.
 BEAM_INVALID = 0      # not a valid range: no flags
@@ -164,7 +164,9 @@ class MapUpdater:
             reason = self._gate.check(t, gate_pose, odometry is not None)
             if reason:
                 self._counts["gated"] += 1
-                return ScanReport(t, ScanStatus.GATED, reason, changed_cells=self._n_changed)
+                n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
+                return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
+                                  changed_cells=self._n_changed)
         sensor, status, reason = self._sensor_for_scan(sensor_pose, pose_check)
         if status is not None:
             self._counts["skipped"] += 1
@@ -216,6 +218,28 @@ class MapUpdater:
                                              n_hits, n_ch, cfg, self._hit_marks, self._drawn,
                                              ws)
         return n_ch, n_new + n_gaps, n_un
+
+    def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
+        """With ``gate_confirm``: the unchanged flags of a scan the gate held back as a view
+        already taken (the robot has not moved, or only turned), and none of its changed
+        flags. A robot standing still or spinning then cannot fill a buffer with changes seen
+        from one place, and its scans still confirm what the map has right, as the scans
+        around them do. Returns the count of unchanged flags (0 for a scan not confirmed:
+        the option off, the sensor off the map, or the scan lost)."""
+        cfg, ref, ws = self.config, self._ref, self._ws
+        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
+        if not cfg.gate_confirm or not self._on_map(sensor):
+            return 0
+        beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws)
+        if steps.is_lost(beams, cfg, ref):
+            return 0
+        n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
+        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
+        n_moved = steps.push_flags(hist, seen, 0, n_un, cfg, self._ch_marks, self._un_marks, ws)
+        self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
+                                        ref.shape[1], cfg, ws)
+        return n_un
 
     def _sensor_for_scan(self, sensor_pose: Pose2D, pose_check):
         """(sensor (gx, gy, yaw), None, "") for a scan to process: the given pose, or the one the
@@ -271,8 +295,10 @@ class MapUpdater:
 
     def updated_map(self) -> OccupancyGrid:
         """M with the changed cells flipped and the last check applied (O(map); on demand)."""
+        # with the unanimous rule, interiors seen through are not closed (README, "real changes")
+        spare = self._hist if self.config.unanimous_min else None
         cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
-                                        self.config.last_check, self._drawn)
+                                        self.config.last_check, self._drawn, spare)
         return OccupancyGrid(cells, self._res, self._origin)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:

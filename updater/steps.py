@@ -444,15 +444,18 @@ def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
 
 # --- output and last check --------------------------------------------------------------------
 def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
-                   last_check: bool, drawn: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                   last_check: bool, drawn: np.ndarray | None = None,
+                   seen_through: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """The output cells: M with the changed cells flipped (free <-> occupied, unknown seen
     through -> free) and, with ``last_check``, the outline of removed objects closed: each
     8-neighbour of a cell that became free that lies in an enclosed unknown region of M and is
     still unknown becomes occupied. The ``drawn`` cells (open unknown space hit often enough)
-    become occupied. Returns (cells, count closed by the last check)."""
+    become occupied. With ``seen_through`` (the buffers), a cell that holds a changed flag is
+    not closed. Returns (cells, count closed by the last check)."""
     out = ref.copy()
+    hist = np.zeros(0, np.uint16) if seen_through is None else seen_through.reshape(-1)
     closed = kernels().apply_changes(ref.reshape(-1), decided, enclosed, ref.shape[1],
-                                     last_check, out.reshape(-1))
+                                     last_check, hist, out.reshape(-1))
     if drawn is not None:
         kernels().apply_drawn(drawn, out.reshape(-1))
     return out, int(closed)

@@ -1,0 +1,103 @@
+"""The gate for recordings of any density (``UpdaterConfig.gate_velocity_max_dt``,
+``gate_turn_views``, ``gate_confirm``) and the robot's defaults that use it: a sparse recording
+is not taken for a fast turn, a robot spinning in place gives a bounded number of views, and a
+robot standing still confirms the map without putting its one view of a change into the
+buffers again and again."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gridmap import FREE, OCCUPIED, Pose2D
+from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+from updater import MapUpdater, UpdaterConfig
+from updater.gating import (GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS,
+                            Gate)
+
+try:
+    import synthetic_room as world
+except ImportError:  # tests collected as a package
+    from tests import synthetic_room as world
+
+ROBOT = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+BOX = world.Rect(6.4125, 5.1125, 7.0125, 5.9125)      # 0.6 x 0.8 m, 1.2 m ahead of the robot
+
+
+def sparse_track(n=40):
+    """A recording that keeps a scan every 1.5 s: 1 m on and 20 deg of turn between scans
+    (13 deg/s, a fast turn for the paper's gate)."""
+    return [(1.5 * k, Pose2D(float(k), 0.0, math.radians(20.0 * k))) for k in range(n)]
+
+
+def run_gate(config, track):
+    g, reasons = Gate(config), []
+    for t, pose in track:
+        reason = g.check(t, pose, True)
+        if reason == "":
+            g.mark_processed(t, pose)
+        reasons.append(reason)
+    return reasons
+
+
+def test_sparse_recording_is_not_read_as_a_fast_turn():
+    paper = run_gate(UpdaterConfig(), sparse_track())
+    robot = run_gate(ROBOT, sparse_track())
+    assert paper.count(GATED_FAST_TURN) > 20           # the paper's gate idles most of it
+    assert robot.count("") == len(robot)               # every scan is a new view
+
+
+def test_a_dense_fast_turn_still_holds_scans_back_briefly():
+    # 10 Hz, 90 deg/s for 1 s while driving 0.5 m/s, then straight on
+    track = [(0.1 * k, Pose2D(0.05 * k, 0.0, math.radians(9.0 * min(k, 10)))) for k in range(40)]
+    reasons = run_gate(ROBOT, track)
+    assert GATED_FAST_TURN in reasons[1:11]
+    resumed = [k for k, r in enumerate(reasons) if r == "" and k > 10]
+    assert resumed and resumed[0] * 0.1 <= 1.0 + ROBOT.gate_recovery_time + 0.5
+
+
+def test_turning_in_place_gives_at_most_gate_turn_views_views():
+    # 20 deg/s in place at 10 Hz for two full turns, then 1 m straight on
+    track = [(0.1 * k, Pose2D(0.0, 0.0, math.radians(2.0 * k))) for k in range(360)]
+    track += [(36.0 + 0.1 * k, Pose2D(0.05 * k, 0.0, 0.0)) for k in range(1, 21)]
+    reasons = run_gate(ROBOT, track)
+    assert reasons[:360].count("") == 1 + ROBOT.gate_turn_views    # the first, then two turns
+    assert reasons.count(GATED_TURN_VIEWS) > 0
+    assert reasons[360:].count("") >= 2                # moving again resets the count
+    unlimited = run_gate(UpdaterConfig(gate_fast_turn_deg_s=3600.0), track)
+    assert unlimited[:360].count("") == 1 + 2 * 360 // 45 - 1     # every 45 deg
+
+
+def _stand_still(config, scans=60):
+    """The robot stands still 1.2 m from where M has a box the world no longer has."""
+    walls = world.room_walls()
+    ref = world.rasterise(walls + [BOX])
+    updater = MapUpdater(ref, config)
+    pose = Pose2D(5.2, 5.5, 0.0)
+    reports = [updater.process(world.full_scan(walls, pose, 0.1 * k), pose, odometry=pose)
+               for k in range(scans)]
+    return ref, updater, reports
+
+
+def test_standing_still_confirms_the_map_but_adds_no_change():
+    box = world.cells_of(BOX)
+    ref, updater, reports = _stand_still(ROBOT)
+    held = [r for r in reports[1:]]
+    assert all(r.reason in (GATED_NO_MOTION, GATED_INTERVAL) for r in held)
+    assert all(r.unchanged_flags > 0 and r.changed_flags == 0 for r in held)
+    out = updater.updated_map().data
+    walls = (ref.data == OCCUPIED) & ~box
+    assert (out[walls] == OCCUPIED).all()
+    # one view of the removed box is one flag per cell: below any threshold, so the box stays
+    assert updater.change_counts()[box].max() == 1
+    assert (out[box & (ref.data == OCCUPIED)] == OCCUPIED).all()
+    # ungated, the same 60 scans are 60 views of one place, and free the box
+    ref, ungated, _ = _stand_still(UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "gating": False}))
+    assert (ungated.updated_map().data[box & (ref.data == OCCUPIED)] == FREE).mean() > 0.5
+
+
+def test_paper_gate_without_confirm_flags_nothing_while_standing():
+    _, updater, reports = _stand_still(UpdaterConfig())
+    assert all(r.unchanged_flags == 0 for r in reports[1:])
+    assert np.count_nonzero(updater.change_counts()) > 0     # the first scan's flags only

@@ -30,11 +30,25 @@ from localization.confidence import PoseCheckConfig
 from updater import UpdaterConfig
 
 # What ``mapupdate update`` and the ROS node give the updater without an ``updater`` section:
-# the class's defaults, and the growth into the unknown, since a real robot's map is rarely
-# whole (a synthetic hall with an unknown bay: 0.85 of the bay's surfaces drawn, none
-# without; tests/test_logs_partly_mapped.py). ``mapupdate run`` keeps the class's defaults:
-# its M1 is mapped whole by design.
-ROBOT_UPDATER_DEFAULTS = {"grow_into_unknown": True}
+# the class's defaults, and
+# - the growth into the unknown, since a real robot's map is rarely whole (a synthetic hall
+#   with an unknown bay: 0.85 of the bay's surfaces drawn, none without;
+#   tests/test_logs_partly_mapped.py);
+# - a gate for recordings of any density (docs/real_changes.md): the angular velocity judged
+#   only over samples at most 0.5 s apart (a recording that keeps a scan a metre turns tens of
+#   degrees between scans), a fast turn at 60 deg/s (skewed scans of a spinning lidar) holding
+#   back 0.5 s of scans, not 1.6 m of travel, at most two views for turning in place, and the
+#   views held back still confirming the map (gate_confirm);
+# - the unanimous rule for cells observed fewer than T times (unanimous_min 3): corridors seen
+#   in passing.
+# ``mapupdate run`` keeps the class's defaults (the paper's and its authors' code): its
+# figures are the paper's method's.
+ROBOT_UPDATER_DEFAULTS = {
+    "grow_into_unknown": True,
+    "gate_velocity_max_dt": 0.5, "gate_fast_turn_deg_s": 60.0, "gate_recovery_time": 0.5,
+    "gate_recovery_distance": 0.0, "gate_turn_views": 2,
+    "unanimous_min": 3,
+}
 
 # The sections of the file and the configuration each holds.
 CLASSES = {"updater": UpdaterConfig, "localizer": LocalizerConfig, "pose_check": PoseCheckConfig}

@@ -164,7 +164,8 @@ class MapUpdater:
             reason = self._gate.check(t, gate_pose, odometry is not None)
             if reason:
                 self._counts["gated"] += 1
-                n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
+                n_un = self._confirm(scan, sensor_pose, pose_check) \
+                    if reason in CONFIRMING else 0
                 return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
                                   changed_cells=self._n_changed)
         sensor, status, reason = self._sensor_for_scan(sensor_pose, pose_check)
@@ -219,16 +220,19 @@ class MapUpdater:
                                              ws)
         return n_ch, n_new + n_gaps, n_un
 
-    def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
+    def _confirm(self, scan: Scan, sensor_pose: Pose2D, pose_check=None) -> int:
         """With ``gate_confirm``: the unchanged flags of a scan the gate held back as a view
         already taken (the robot has not moved, or only turned), and none of its changed
         flags. A robot standing still or spinning then cannot fill a buffer with changes seen
         from one place, and its scans still confirm what the map has right, as the scans
-        around them do. Returns the count of unchanged flags (0 for a scan not confirmed:
-        the option off, the sensor off the map, or the scan lost)."""
+        around them do. The pose check, when given, vouches for the pose as for any scan.
+        Returns the count of unchanged flags (0 for a scan not confirmed: the option off, the
+        sensor off the map, the pose refused, or the scan lost)."""
         cfg, ref, ws = self.config, self._ref, self._ws
-        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
-        if not cfg.gate_confirm or not self._on_map(sensor):
+        if not cfg.gate_confirm:
+            return 0
+        sensor, status, _ = self._sensor_for_scan(sensor_pose, pose_check)
+        if status is not None:
             return 0
         beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws)
         if steps.is_lost(beams, cfg, ref):

@@ -40,6 +40,7 @@ class Observation:
     recorded: Pose2D | None       # the robot in the map frame, from the recorded localisation
     truth: Pose2D | None          # the robot's true pose, when the log has it
     sensor: Pose2D | None = None  # the laser in the map frame as the log gives it (CARMEN)
+    topic: str = ""               # which lidar: a bag's scan topic, a CARMEN line's message
 
 
 # --- format ------------------------------------------------------------------------------------
@@ -126,7 +127,7 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
             mount = Pose2D(0.0, 0.0, 0.0)
         recorded = None if r.laser_pose is None else r.laser_pose.compose(mount.inverse())
         out.append(Observation(r.time, r.scan, mount, robot_odom, recorded, truth.at(r.time),
-                               sensor=r.laser_pose))
+                               sensor=r.laser_pose, topic=r.topic))
     recorded = any(o.sensor is not None for o in out)
     has = {"recorded": recorded, "map_frame": recorded and map_frame,
            "odometry": any(o.odom is not None for o in out), "truth": len(truth) > 0}
@@ -223,7 +224,7 @@ def bag_observations(path, poses: BagPoses, *, scan_topics=None, laser_mount=Non
         if recorded is None and tree.parent.get(poses.base_frame) is None:
             recorded = poses.amcl.at(t)  # no odometry to carry the pose: the nearest estimate
         yield Observation(t, r.scan, mount, tree.lookup(poses.odom_frame, poses.base_frame, t),
-                          recorded, poses.truth.at(t))
+                          recorded, poses.truth.at(t), topic=r.topic)
 
 
 def _mount(poses: BagPoses, r: ScanRecord, laser_mount) -> Pose2D:

@@ -95,7 +95,9 @@ def _cmd_update(args) -> int:
     from .outputs import check_outputs, map_files, map_inputs
     from .robot_config import load_robot_config
 
-    config = load_robot_config(args.config)     # refused before the log is read
+    # the method and --state, then the configuration, are refused before anything is read
+    replay.check_update_arguments(args.poses, args.smooth_poses, args.method, args.state)
+    config = load_robot_config(args.config)
     check_outputs({"--map": map_inputs(args.map), "--log": [args.log],
                    "--config": [args.config] if args.config else [],
                    "--state": [args.state] if args.state and args.state.exists() else []},
@@ -110,7 +112,7 @@ def _cmd_update(args) -> int:
         log_format=args.format, scan_topics=args.scan_topic or None,
         odom_topic=args.odom_topic, pose_topic=args.pose_topic, pose_check=args.pose_check,
         strict=args.strict, initial_pose=start, trajectory_path=args.trajectory,
-        smooth_window=args.smooth_poses)
+        smooth_window=args.smooth_poses, method=args.method)
     summary.setdefault("out", str(args.out))
     print("\n".join(replay.summary_lines(summary)))
     return 0
@@ -127,6 +129,41 @@ def _cmd_map(args) -> int:
                                   odom_topic=args.odom_topic, pose_topic=args.pose_topic,
                                   progress=not args.no_progress)
     print("\n".join(logmap.summary_lines(summary)))
+    return 0
+
+
+def _cmd_inject(args) -> int:
+    from evaluation import edited_world
+    from gridmap import load_map
+    from robotlogs import log_observations
+
+    edited_world.check_case_dir(args.out, args.map, args.log)     # before anything is read
+    grid = load_map(args.map)
+    found = log_observations(args.log, log_format=args.format, strict=args.strict,
+                             scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
+                             pose_topic=args.pose_topic)
+    case = edited_world.make_case(grid, found.observations, args.seed, removed=args.removed,
+                                  added=args.added, moved=args.moved, people=args.people,
+                                  min_views=args.min_views, progress=not args.no_progress)
+    edited_world.write_case(case, args.out, map_path=args.map, log_path=args.log)
+    print("\n".join(edited_world.case_lines(case, args.out)))
+    return 0
+
+
+def _cmd_score(args) -> int:
+    from evaluation import edited_world
+    from gridmap import load_map
+
+    from .outputs import check_outputs, map_inputs
+
+    if args.json is not None:
+        check_outputs({"DIR": [args.case / f for f in edited_world.CASE_FILES],
+                       "OUT.yaml": map_inputs(args.updated)}, {"--json": [args.json]})
+    scores = edited_world.score_case(args.case, load_map(args.updated))
+    print("\n".join(edited_world.score_lines(scores)))
+    if args.json is not None:
+        edited_world.write_scores(scores, args.json)
+        print(f"wrote {args.json}")
     return 0
 
 
@@ -151,6 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ros1(sub)
     _add_generate(sub)
     _add_sweep(sub)
+    _add_inject(sub)
+    _add_score(sub)
     return p
 
 
@@ -204,7 +243,12 @@ def _add_update(sub) -> None:
                      help="ROS 1 bag, ROS 2 bag folder or CARMEN log")
     upd.add_argument("--out", type=Path, required=True, help="YAML path of the updated map")
     upd.add_argument("--state", type=Path, default=None,
-                     help="updater state file: loaded if present, saved at the end")
+                     help="updater state file: loaded if present, saved at the end (method "
+                          "paper only)")
+    upd.add_argument("--method", default="paper", metavar="NAME",
+                     help="what updates the map: paper (the updater, default), fuse (log-odds "
+                          "mapping on the map as the prior), hybrid (the paper's detector "
+                          "decides where, fuse's evidence what)")
     upd.add_argument("--poses", default="auto", choices=["auto", "recorded", "localizer", "truth"],
                      help="where scan poses come from (default: recorded when present)")
     upd.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
@@ -254,6 +298,42 @@ def _add_map(sub) -> None:
                          "ones (default: recorded)")
     _add_log_options(mp)
     mp.set_defaults(func=_cmd_map)
+
+
+def _add_inject(sub) -> None:
+    inj = sub.add_parser("inject", help="make an edited-world case from a log with corrected "
+                                        "poses and its map (docs/edited_world.md)",
+                         description="Draw removed boxes into the map and cut added boxes and "
+                         "walking people into the log's scans, so that an update's result can "
+                         "be scored against an exact truth with 'mapupdate score'.")
+    inj.add_argument("--map", type=Path, required=True, help="map_server YAML of the log's map")
+    inj.add_argument("--log", type=Path, required=True,
+                     help="ROS 1 bag, ROS 2 bag folder or CARMEN log with corrected poses")
+    inj.add_argument("--out", type=Path, required=True,
+                     help="the case folder to write (new or empty)")
+    inj.add_argument("--seed", type=int, required=True, help="seed of every random choice")
+    inj.add_argument("--removed", type=int, default=4, metavar="K",
+                     help="boxes drawn into the map where the scans see free floor (4)")
+    inj.add_argument("--added", type=int, default=4, metavar="K",
+                     help="boxes cut into the scans where the map is free (4)")
+    inj.add_argument("--moved", type=int, default=0, metavar="K",
+                     help="objects moved: a removed box and an added one of its size (0)")
+    inj.add_argument("--people", type=int, default=0, metavar="K",
+                     help="people walking through the scans, never part of the truth (0)")
+    inj.add_argument("--min-views", type=int, default=5, metavar="N",
+                     help="scans that must see each box with 3 beams or more (5)")
+    _add_log_options(inj)
+    inj.set_defaults(func=_cmd_inject)
+
+
+def _add_score(sub) -> None:
+    sc = sub.add_parser("score", help="score an updated map against an edited-world case")
+    sc.add_argument("case", type=Path, metavar="DIR", help="the case folder of 'mapupdate inject'")
+    sc.add_argument("updated", type=Path, metavar="OUT.yaml",
+                    help="the map 'mapupdate update' wrote from DIR/stale.yaml and DIR/log.clf")
+    sc.add_argument("--json", type=Path, default=None, metavar="FILE",
+                    help="also write the scores as JSON")
+    sc.set_defaults(func=_cmd_score)
 
 
 def _add_ros1(sub) -> None:

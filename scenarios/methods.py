@@ -52,6 +52,10 @@ from gridmap.suggest import did_you_mean
 
 # The methods, the paper's first (the default).
 METHODS = ("paper", "none", "remap", "fuse", "hybrid")
+# The methods that update a robot's map (``mapupdate update --method``, the ROS node's
+# ``~method``): ``none`` would write the map unchanged and ``remap`` forget what a recording
+# did not see, which only the study's comparisons want.
+ROBOT_METHODS = ("paper", "fuse", "hybrid")
 
 # [m] how far from the paper's detected changes the hybrid lets occupancy evidence decide: the
 # pairing distance D(r) at its shortest, within which the paper reads a face as unchanged
@@ -62,11 +66,11 @@ class MethodError(MapUpdatingError, ValueError):
     """An unknown method name, or a method that cannot be built on the map given."""
 
 
-def check_method(name, source: str = "method") -> str:
-    """``name`` if it names a method, else a ``MethodError`` naming the nearest one."""
-    if name not in METHODS:
-        raise MethodError(f"{source}: unknown method {name!r}{did_you_mean(name, METHODS)} "
-                          f"(methods: {', '.join(METHODS)})")
+def check_method(name, source: str = "method", choices=METHODS) -> str:
+    """``name`` if it names one of ``choices``, else a ``MethodError`` naming the nearest."""
+    if name not in choices:
+        raise MethodError(f"{source}: unknown method {name!r}{did_you_mean(name, choices)} "
+                          f"(methods: {', '.join(choices)})")
     return name
 
 

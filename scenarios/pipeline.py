@@ -18,7 +18,7 @@ answer is a typed ``gridmap.PoseVerdict`` and the updater's a ``ScanReport`` wit
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from functools import partial
 
 from gridmap import Pose2D, Scan
@@ -33,6 +33,9 @@ class PipelineCounts:
     scans_processed: int = 0              # classified by the updater (lost ones included)
     scans_dropped_as_lost: int = 0        # classified, then dropped by the lost check
     scans_refused_by_pose_check: int = 0  # the pose check refused their pose
+    scans_gated: int = 0                  # not processed: the updater's gate refused them
+    gated_by: dict = field(default_factory=dict)   # ... by the gate's rule (ScanReport.reason)
+    scans_off_map: int = 0                # not processed: the sensor pose lay off the map
     localizer_updates: int = 0            # scans the localiser ran a filter update on
     scans_not_tracking: int = 0           # withheld: the localiser was lost or converging
 
@@ -140,3 +143,7 @@ class RobotPipeline:
         c.scans_processed += report.processed
         c.scans_dropped_as_lost += report.status is ScanStatus.LOST
         c.scans_refused_by_pose_check += report.status is ScanStatus.REFUSED
+        c.scans_off_map += report.status is ScanStatus.OFF_MAP
+        if report.status is ScanStatus.GATED:
+            c.scans_gated += 1
+            c.gated_by[report.reason] = c.gated_by.get(report.reason, 0) + 1

@@ -23,25 +23,38 @@ Where the poses come from (``pose_source``):
 - ``"truth"``: a bag's true pose topic (simulated sessions), a CARMEN log's ``TRUEPOS``.
 - ``"auto"``: ``"recorded"`` when the log has poses for its scans and no ``initial_pose`` is
   given, else ``"localizer"``.
+
+What updates the map (``method``): the paper's updater (the default), or ``fuse`` / ``hybrid``
+of :mod:`scenarios.methods`, behind the same gate and pose check. Only the paper's updater has
+a state to save and load.
+
+Scan times: the gate and the pose smoother need time to pass between scans. A log whose stamps
+stay equal from scan to scan, or go back, is given a clock from scan order instead
+(:class:`ScanClock`), and the summary says for how many scans.
 """
 
 from __future__ import annotations
 
 import math
 import time as _time
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
+from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
 from robotlogs import LogError, Observation, log_observations
 
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
 
+from .methods import ROBOT_METHODS, check_method
 from .pipeline import RobotPipeline
 
 POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
+# The summary's counts of changed cells (``_changes``), each cell in one of them.
+CHANGE_KEYS = ("occupied_to_free", "free_to_occupied", "unknown_to_free", "unknown_to_occupied",
+               "known_to_unknown")
 # Where the robot starts when the localiser has only a rough idea: std of x, y [m], yaw [rad].
 INITIAL_STD = (0.25, 0.25, 0.1)
 NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
@@ -53,11 +66,88 @@ NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
 LOCALIZER_DEFAULTS = {"update_min_d": 0.1}
 
 
+class ScanClock:
+    """Times for the scans of a log whose stamps do not always increase: all equal (a logger
+    that wrote no time, or 0), repeated (stamps coarser than the scan rate), or going back (a
+    clock set back while recording).
+
+    ``clock(stamp, lidar)`` once per scan, in log order, gives the time to use. While a lidar's
+    stamps increase, its scans keep them (moved by the offset of any earlier repair). A scan
+    whose stamp is not later than the lidar's previous one is placed one nominal period after
+    the time that previous scan got, and the lidar's later stamps keep that offset, so a jump
+    back moves the rest of the log as a whole and no later stamp is repaired for it. The
+    nominal period is the median of the lidar's intervals per scan so far (a stamp that
+    increases after k repeats of the one before counts its interval over k + 1 scans; the
+    last ``keep`` intervals), or ``DEFAULT_PERIOD`` before any. Scans of different lidars may
+    share a stamp. Memory: ``keep`` intervals per lidar, whatever the log's length.
+    """
+
+    DEFAULT_PERIOD = 1.0     # [s] between scans when the log gives no interval at all
+
+    def __init__(self, keep: int = 1001):
+        self.keep = keep
+        self._lidars: dict = {}     # lidar -> _LidarTimes
+        self.scans = 0              # scans timed
+        self.same = 0               # ... whose stamp equals the lidar's previous one
+        self.earlier = 0            # ... whose stamp precedes it
+        self.period: float | None = None   # [s] the last period a scan was placed with
+        self.measured = False       # ... the median of the log's intervals (else the default)
+
+    def __call__(self, stamp: float, lidar="") -> float:
+        self.scans += 1
+        own = self._lidars.get(lidar)
+        if own is None:
+            self._lidars[lidar] = _LidarTimes(stamp, deque(maxlen=self.keep))
+            return stamp
+        last, own.stamp = own.stamp, stamp
+        if stamp > last:
+            own.intervals.append((stamp - last) / (own.repeats + 1))
+            own.repeats = 0
+            own.time = stamp + own.offset
+            return own.time
+        if stamp == last:
+            self.same += 1
+            own.repeats += 1
+        else:
+            self.earlier += 1
+            own.repeats = 0
+        self.measured = bool(own.intervals)
+        self.period = float(np.median(own.intervals)) if own.intervals else self.DEFAULT_PERIOD
+        own.time += self.period
+        own.offset = own.time - stamp
+        return own.time
+
+    @property
+    def placed(self) -> int:
+        """Scans given a time from scan order instead of their stamp."""
+        return self.same + self.earlier
+
+    def summary(self) -> dict:
+        return {"scans": self.scans, "same_as_before": self.same,
+                "earlier_than_before": self.earlier, "period_s": self.period,
+                "period_measured": self.measured}
+
+
+@dataclass
+class _LidarTimes:
+    """One lidar's side of a :class:`ScanClock`."""
+
+    stamp: float                 # its last stamp, as logged
+    intervals: deque             # [s] its recent intervals per scan
+    offset: float = 0.0          # [s] added to its stamps since the last repair
+    repeats: int = 0             # scans since its stamp last increased, all with that stamp
+    time: float = field(init=False)   # [s] the time its last scan got
+
+    def __post_init__(self):
+        self.time = self.stamp
+
+
 @dataclass
 class Replay:
     """What the replay loop gathers besides the pipeline's counters."""
 
     read: int = 0                                        # observations read from the log
+    clock: ScanClock = field(default_factory=ScanClock)  # the scans' times
     first_time: float | None = None                      # [s] of the first scan replayed
     times: list = field(default_factory=list)            # [s] of the scans the update used
     poses: list = field(default_factory=list)            # robot poses (x, y, yaw) it used
@@ -75,7 +165,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                     end_time: float | None = None, seed: int = 0,
                     pose_check: bool = False, pose_check_config=None,
                     trajectory_path=None, tracking_config=None,
-                    smooth_window: float = SMOOTH_WINDOW) -> dict:
+                    smooth_window: float = SMOOTH_WINDOW, method: str = "paper") -> dict:
     """Update the map at ``map_path`` with the scans of ``log_path``; write ``out_path``.
 
     With ``state_path``, the updater's state is loaded from it when the file exists (so this
@@ -89,11 +179,13 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
     robot pose of each scan the update was given, as it was placed (smoothed, and the pose
     check's refinement where it refined; scans it refused and scans withheld while the
     localiser was not tracking are left out), in TUM format. No ``updater_config``: the robot's
-    defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``). Returns a summary for people."""
+    defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``). ``method``: what updates the map, one
+    of ``methods.ROBOT_METHODS``; ``state_path`` only with ``"paper"``. Returns a summary for
+    people (``summary_lines``)."""
     from gridmap import load_map
 
     wall0 = _time.perf_counter()
-    _check_arguments(pose_source, smooth_window)
+    check_update_arguments(pose_source, smooth_window, method, state_path)
     _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path)
     grid = load_map(map_path)
     found = log_observations(log_path, log_format=log_format, strict=strict,
@@ -101,7 +193,7 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                              pose_topic=pose_topic, truth_topic=truth_topic,
                              laser_mount=laser_mount)
     source = _choose_source(pose_source, found.has, log_path, initial_pose is not None)
-    updater, state_loaded = _updater(grid, updater_config, state_path)
+    updater, state_loaded = _updater(grid, updater_config, state_path, method)
     pipeline = _pipeline(updater, pose_check, pose_check_config,
                          _smoother(smooth_window, source, found.has))
     starter = None
@@ -112,22 +204,37 @@ def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_sourc
                      f"updating from {Path(log_path).name}" if progress else None)
     _check_placed(pipeline, replay, found, log_path)
     updated = _save_outputs(updater, replay, out_path, state_path, trajectory_path)
-    c = pipeline.counts
     return {
         "log": str(log_path), "format": found.format, "map": str(map_path),
         "out": str(out_path), "state": None if state_path is None else str(state_path),
-        "state_loaded": state_loaded, "pose_source": source, "scans": replay.read,
-        "scans_used": c.scans - c.scans_without_pose - c.scans_not_tracking,
-        **{k: v for k, v in c.as_dict().items() if k != "scans"},
-        **_changes(grid, updated), "read": found.stats.as_dict(),
-        "read_lines": found.stats.lines(), "tracking": _tracking_summary(pipeline, replay),
+        "state_loaded": state_loaded, "method": method, "pose_source": source,
+        **_what_happened(pipeline, replay, found), **_changes(grid, updated),
+        "evidence": _evidence(updater),
         "trajectory": None if trajectory_path is None else str(trajectory_path),
-        "smoothing": _smoothing_summary(pipeline.smoother),
         "wall_s": _time.perf_counter() - wall0,
     }
 
 
-def _check_arguments(pose_source, smooth_window) -> None:
+def _what_happened(pipeline: RobotPipeline, replay: Replay, found) -> dict:
+    """The summary's account of the scans: read, used, the pipeline's counters, their times,
+    what the readers skipped, the localiser's and the smoother's doings."""
+    c = pipeline.counts
+    return {"scans": replay.read,
+            "scans_used": c.scans - c.scans_without_pose - c.scans_not_tracking,
+            **{k: v for k, v in c.as_dict().items() if k != "scans"},
+            "timestamps": replay.clock.summary(), "read": found.stats.as_dict(),
+            "read_lines": found.stats.lines(), "tracking": _tracking_summary(pipeline, replay),
+            "smoothing": _smoothing_summary(pipeline.smoother)}
+
+
+def check_update_arguments(pose_source, smooth_window, method="paper", state_path=None
+                           ) -> None:
+    """Refuse arguments that cannot go together, before anything is read."""
+    check_method(method, "--method", ROBOT_METHODS)
+    if state_path is not None and method != "paper":
+        raise LogError(f"--state {state_path}: only the paper's updater has a state to save and "
+                       f"load, --method {method} has none; leave out --state or use --method "
+                       "paper")
     if pose_source not in POSE_SOURCES:
         raise LogError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, "
                        f"got {pose_source!r}")
@@ -192,6 +299,9 @@ def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
             out.read += 1
             if (first is not None and obs.time < first) or (last is not None and obs.time > last):
                 continue
+            t = out.clock(obs.time, obs.topic)
+            if t != obs.time:
+                obs = replace(obs, time=t, scan=replace(obs.scan, time=t))
             if starter is not None and pipeline.localizer is None and obs.odom is not None:
                 pipeline.localizer, pipeline.tracking = starter.start(obs)
                 out.start = starter.how
@@ -336,14 +446,16 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
                            "it a path of its own")
 
 
-def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
-    """A fresh updater on ``grid`` (with ``config``, else with the robot's defaults,
-    ``robot_config.ROBOT_UPDATER_DEFAULTS``), or the one saved in ``state_path`` when that
-    exists. A state holds its reference map whole, which is its fingerprint: it is refused for
-    any other map, and a configuration given with it must be the one it was made with (its
-    buffers follow that configuration)."""
+def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper"
+             ) -> tuple[object, bool]:
+    """A fresh ``method`` on ``grid`` (with ``config``, else with the robot's defaults,
+    ``robot_config.ROBOT_UPDATER_DEFAULTS``; the baselines use its gate), or the paper's
+    updater saved in ``state_path`` when that exists. A state holds its reference map whole,
+    which is its fingerprint: it is refused for any other map, and a configuration given with
+    it must be the one it was made with (its buffers follow that configuration)."""
     from updater import MapUpdater, UpdaterConfig
 
+    from .methods import make_method
     from .robot_config import ROBOT_UPDATER_DEFAULTS
 
     if isinstance(config, dict):
@@ -351,7 +463,8 @@ def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
     elif isinstance(config, (str, Path)):
         config = UpdaterConfig.from_yaml(config)
     if state_path is None or not Path(state_path).exists():
-        return MapUpdater(grid, config or UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)), False
+        config = config or UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+        return make_method(method, grid, config), False
     upd = MapUpdater.load(state_path)
     ref = upd.reference_map
     if not ref.same_frame(grid):
@@ -372,26 +485,57 @@ def _updater(grid: OccupancyGrid, config, state_path) -> tuple[object, bool]:
 
 
 def _changes(before: OccupancyGrid, after: OccupancyGrid) -> dict:
+    """The cells the output changed, by what they were and what they are now.
+    ``cells_freed`` / ``cells_occupied``: every cell now free / occupied that was not (an
+    unknown cell made known included)."""
     a, b = before.data, after.data
-    return {"cells_freed": int(((a != FREE) & (b == FREE)).sum()),
-            "cells_occupied": int(((a != OCCUPIED) & (b == OCCUPIED)).sum())}
+
+    def count(was, now) -> int:
+        return int(np.count_nonzero(was & now))
+
+    out = {"occupied_to_free": count(a == OCCUPIED, b == FREE),
+           "free_to_occupied": count(a == FREE, b == OCCUPIED),
+           "unknown_to_free": count(a == UNKNOWN, b == FREE),
+           "unknown_to_occupied": count(a == UNKNOWN, b == OCCUPIED),
+           "known_to_unknown": count(a != UNKNOWN, b == UNKNOWN)}
+    out["cells_freed"] = out["occupied_to_free"] + out["unknown_to_free"]
+    out["cells_occupied"] = out["free_to_occupied"] + out["unknown_to_occupied"]
+    return out
+
+
+def _evidence(updater) -> dict | None:
+    """Cells whose evidence of change stayed below the threshold (``pending_cells``, of them
+    ``pending_few_observations`` seen by fewer than ``threshold`` processed scans and
+    ``pending_outvoted`` outvoted), for a method that keeps such evidence; else None."""
+    summary = getattr(updater, "evidence_summary", None)
+    if summary is None:
+        return None
+    return {**summary(), "threshold": int(updater.config.threshold)}
 
 
 # --- the summary, for people --------------------------------------------------------------------
 
 def summary_lines(s: dict) -> list[str]:
-    """The summary of ``update_from_log`` as lines for the command line: the map written, what
-    the readers skipped (one line per kind), how the localiser fared, warnings."""
+    """The summary of ``update_from_log`` as lines for the command line: the map written and
+    its cells changed by kind, the scans and what became of them, what the readers skipped
+    (one line per kind), the gate's refusals by rule, the evidence of change left below the
+    threshold, how the localiser fared, warnings. When no cell changed, a line says why."""
     g = s.get
-    out = [f"wrote {g('out')}: {g('cells_freed', 0)} cells freed, {g('cells_occupied', 0)} "
-           f"occupied (poses: {g('pose_source')})"]
+    changed = sum(g(k, 0) for k in CHANGE_KEYS)
+    used = f"method {g('method', 'paper')}, poses {g('pose_source')}"
+    out = [f"wrote {g('out')}: {_changes_text(s) if changed else '0 cells changed'}; {used}"]
     skipped = sum((g("read") or {}).get("skipped", {}).values())
     out.append(f"  {g('scans', 0)} scans read" + (f" ({skipped} lines or messages of the log "
                                                    "skipped, below)" if skipped else "")
                + f", {g('scans_used', g('scans', 0))} used; {g('scans_processed', 0)} "
                f"processed past the gate, {g('scans_dropped_as_lost', 0)} dropped as lost, "
-               f"{g('scans_refused_by_pose_check', 0)} refused by the pose check")
+               f"{g('scans_refused_by_pose_check', 0)} refused by the pose check"
+               + (f", {g('scans_off_map')} off the map" if g("scans_off_map") else ""))
     out += [f"  {line}" for line in g("read_lines") or []]
+    if not changed:
+        out.append(f"  0 cells changed: {_why_unchanged(s)}")
+    else:
+        out += [f"  {part}" for part in (_gate_text(s), _pending_text(s)) if part]
     smooth = g("smoothing") or {}
     if smooth.get("scans_smoothed"):
         out.append(f"  {smooth['scans_smoothed']} recorded poses jittered against the odometry "
@@ -412,11 +556,73 @@ def summary_lines(s: dict) -> list[str]:
     return out
 
 
+def _changes_text(s: dict) -> str:
+    """"12 occupied cells freed, 40 free cells occupied, 8795 unknown cells now known (8790
+    free, 5 occupied)"."""
+    g = s.get
+    known = g("unknown_to_free", 0) + g("unknown_to_occupied", 0)
+    text = (f"{g('occupied_to_free', 0)} occupied cells freed, {g('free_to_occupied', 0)} free "
+            f"cells occupied, {known} unknown cells now known ({g('unknown_to_free', 0)} free, "
+            f"{g('unknown_to_occupied', 0)} occupied)")
+    if g("known_to_unknown"):
+        text += f", {g('known_to_unknown')} known cells now unknown"
+    return text
+
+
+def _gate_text(s: dict, brief: bool = False) -> str:
+    """"the gate refused 380 of 406 scans: fast turn 300, no motion 80" ("" when it refused
+    none); ``brief``: the rules in parentheses."""
+    gated = s.get("scans_gated", 0)
+    if not gated:
+        return ""
+    rules = sorted((s.get("gated_by") or {}).items(), key=lambda kv: (-kv[1], kv[0]))
+    listed = ", ".join(f"{rule} {n}" for rule, n in rules)
+    head = f"the gate refused {gated} of {s.get('scans_used', gated)} scans"
+    return f"{head} ({listed})" if brief else f"{head}: {listed}"
+
+
+def _pending_text(s: dict, brief: bool = False) -> str:
+    """The cells whose evidence of change stayed below the threshold ("" for none, or for a
+    method that keeps no such evidence)."""
+    e = s.get("evidence")
+    if not e or not e.get("pending_cells"):
+        return ""
+    head = f"{e['pending_cells']} cells collected evidence of change below the threshold"
+    few = f"{e['pending_few_observations']} seen by fewer than {e['threshold']} processed scans"
+    if brief:
+        return f"{head} ({few})"
+    return f"{head}: {few}, {e['pending_outvoted']} outvoted by scans that saw them unchanged"
+
+
+def _why_unchanged(s: dict) -> str:
+    """Why the output changed no cell: the evidence left below the threshold and the scans
+    that never reached the map, each counted."""
+    g = s.get
+    why = [part for part in (_pending_text(s, brief=True), _gate_text(s, brief=True)) if part]
+    for key, text in (("scans_refused_by_pose_check", "the pose check refused {} scans"),
+                      ("scans_dropped_as_lost", "the lost check dropped {} scans"),
+                      ("scans_off_map", "{} scans lay off the map"),
+                      ("scans_not_tracking", "{} scans came while the localiser was not "
+                                             "tracking")):
+        if g(key):
+            why.append(text.format(g(key)))
+    processed = g("scans_processed", 0)
+    if not processed:
+        why.insert(0, "no scan was processed")
+    elif not why:
+        why.append(f"the {processed} scans processed found no evidence of change"
+                   if g("evidence") is not None else
+                   f"the {processed} scans processed gave no cell evidence enough to change it")
+    return "; ".join(why)
+
+
 def _warnings(s: dict) -> list[str]:
-    """What a user should look at: scans whose poses disagree with the map, mostly."""
+    """What a user should look at: scans whose poses disagree with the map, mostly, and stamps
+    that do not tell time."""
     g = s.get
     asked = g("scans_processed", 0) + g("scans_refused_by_pose_check", 0)
-    out = []
+    stamps = _stamps_text(g("timestamps"))
+    out = [stamps] if stamps else []
     if asked and g("scans_refused_by_pose_check", 0) > 0.5 * asked:
         out.append(f"the pose check refused {g('scans_refused_by_pose_check')} of the {asked} "
                    "scans past the gate: their poses disagree with the map (drifted odometry? "
@@ -426,6 +632,25 @@ def _warnings(s: dict) -> list[str]:
                    f"{g('scans_processed')} scans processed: most beams disagree with the map "
                    "there (wrong poses, or a place the map does not cover)")
     return out
+
+
+def _stamps_text(t: dict | None) -> str:
+    """"404 of 406 scans have the same timestamp as the scan before; ...", or "" when every
+    stamp increased."""
+    if not t or not (t["same_as_before"] or t["earlier_than_before"]):
+        return ""
+    same, earlier, n = t["same_as_before"], t["earlier_than_before"], t["scans"]
+    if same and earlier:
+        what = f"{same} of {n} scans have the same timestamp as the scan before and {earlier} " \
+               "an earlier one"
+    elif same:
+        what = f"{same} of {n} scans have the same timestamp as the scan before"
+    else:
+        what = f"{earlier} of {n} scans have an earlier timestamp than the scan before"
+    period = "the median interval between the log's scans" if t["period_measured"] else \
+        "the log gives no interval between its scans"
+    return f"{what}; their times were taken from scan order, {t['period_s']:g} s after the " \
+           f"scan before ({period}), for the gate and the pose smoothing"
 
 
 def parse_pose(values) -> Pose2D:

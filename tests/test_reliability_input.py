@@ -22,7 +22,7 @@ from localization import MonteCarloLocalizer
 from localization.confidence import PoseCheck
 from robotlogs.carmen import parse_carmen
 from robotlogs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
-from scenarios.replay import update_from_log
+from scenarios.replay import summary_lines, update_from_log
 from robotlogs.rosbag import BagWriter, read_bag, write_bag
 from updater import MapUpdater, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK
@@ -321,9 +321,11 @@ def test_carmen_lines_out_of_time_order_replay_as_if_sorted(tmp_path):
     assert (a == b).all() and sa["scans_processed"] == sb["scans_processed"] > 5
 
 
-def test_bag_with_header_stamps_going_back_replays_and_gates_them(tmp_path, monkeypatch):
+def test_bag_with_header_stamps_going_back_replays_and_says_so(tmp_path, monkeypatch):
     """A bag is stored in receive order; here the sender's clock jumps back mid-way, so the
-    header stamps (what the replay uses) go backwards while the bag's own times go on."""
+    header stamps (what the replay uses) go backwards while the bag's own times go on. The
+    replay times the scan after the jump from scan order (the median interval after the one
+    before) and the scans after it keep their intervals, so the gate goes on as before."""
     walls, ref = room()
     save_map(ref, tmp_path / "m.yaml")
     received = {"t": 0.0}
@@ -346,9 +348,12 @@ def test_bag_with_header_stamps_going_back_replays_and_gates_them(tmp_path, monk
     assert scans[5:7] == [3.5, 1.0]
     s = update_from_log(tmp_path / "m.yaml", tmp_path / "b.bag", tmp_path / "out.yaml",
                         progress=False)
-    # the scan after the jump restarts the gate (not processed); the others are processed
-    assert s["scans"] == s["scans_used"] == 12 and s["scans_processed"] == 11
+    assert s["scans"] == s["scans_used"] == s["scans_processed"] == 12
     assert s["cells_freed"] == s["cells_occupied"] == 0
+    assert s["timestamps"] == {"scans": 12, "same_as_before": 0, "earlier_than_before": 1,
+                               "period_s": 0.5, "period_measured": True}
+    assert "1 of 12 scans have an earlier timestamp than the scan before" in \
+        "\n".join(summary_lines(s))
 
 
 # --- scenario files ------------------------------------------------------------------------------

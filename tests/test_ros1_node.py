@@ -35,9 +35,9 @@ def bags(tmp_path_factory):
     return root
 
 
-def update(bags, reference, bag, out) -> np.ndarray:
+def update(bags, reference, bag, out, *more) -> np.ndarray:
     assert main(["update", "--map", str(reference), "--log", str(bag), "--out", str(out),
-                 "--no-progress"]) == 0
+                 "--no-progress", *more]) == 0
     return load_map(out).data
 
 
@@ -72,6 +72,14 @@ def test_node_saves_the_map_mapupdate_update_makes_of_the_same_bag(realtime, bag
     assert health["scans_received"] == health["scans_used"] == "590"
     assert int(health["scans_processed"]) > 20 and health.get("scans_dropped_behind", "0") == "0"
     assert float(health["scan_time_ms_mean"]) > 0
+    # never silent: the method, the gate's refusals by rule, the evidence short of the threshold
+    assert health["method"] == "paper"
+    gated = {k: int(v) for k, v in health.items() if k.startswith("gated_by: ")}
+    assert sum(gated.values()) == int(health["scans_gated"]) > 0
+    assert int(health["scans_processed"]) + int(health["scans_gated"]) \
+        + int(health["scans_off_map"]) == 590
+    assert int(health["pending_cells"]) == int(health["pending_few_observations"]) \
+        + int(health["pending_outvoted"]) >= 0
 
 
 def test_latched_map_updated_is_a_valid_grid_of_the_maps_size_and_origin(realtime, bags):
@@ -123,6 +131,27 @@ def test_played_at_five_times_it_keeps_up_or_says_what_it_dropped(ros, bags, tmp
     dropped = int(health.get("scans_dropped_behind", "0"))
     assert int(health["scans_received"]) == 590 and int(health["scans_used"]) + dropped == 590
     assert node.poll() is None
+    ros.stop(node)
+
+
+def test_the_method_parameter_gives_the_map_mapupdate_update_gives_with_it(ros, bags, tmp_path):
+    save = tmp_path / "hybrid.yaml"
+    node = ros.node("--map", str(bags / "run/maps/M_W1.yaml"), f"_save_path:={save}",
+                    "_method:=hybrid", "__name:=hybrid", name="hybrid")
+    ros.play(bags / "bags/W2.bag", rate=5.0)
+    time.sleep(1.0)
+    answer = ros.call("/hybrid/save")
+    assert "success: True" in answer, answer
+    expected = update(bags, bags / "run/maps/M_W1.yaml", bags / "bags/W2.bag",
+                      tmp_path / "update.yaml", "--method", "hybrid")
+    paper = load_map(bags / "run/maps/M_W1.yaml").data
+    assert (expected != paper).sum() > 500
+    health = ros.health("hybrid", tmp_path / "d.json")
+    assert health["method"] == "hybrid" and "pending_cells" not in health
+    if health.get("scans_dropped_behind", "0") == "0":
+        assert np.array_equal(load_map(save).data, expected)
+    else:        # a loaded machine dropped scans at 5x: the map may differ a little
+        assert (load_map(save).data != expected).mean() < 0.01, health
     ros.stop(node)
 
 

@@ -35,6 +35,9 @@ def test_defaults_are_rosy_and_sections_reach_the_configs():
     ({"use_pose_check": "yes"}, ["'~use_pose_check'"]),
     ({"smooth_poses": 120.0}, ["'~smooth_poses'", "[0, 60]"]),
     ({"updater": 3}, ["'~updater' must be a mapping"]),
+    ({"method": "fusse"}, ["parameter '~method': unknown method 'fusse'", "'fuse'",
+                           "(methods: paper, fuse, hybrid)"]),
+    ({"method": "remap"}, ["parameter '~method': unknown method 'remap'"]),
 ])
 def test_bad_parameters_are_refused_with_a_line_that_names_them(params, words):
     with pytest.raises(MapUpdatingError) as e:
@@ -101,3 +104,44 @@ def test_the_node_grows_the_map_into_the_unknown_as_update_does_unless_configure
     assert updater.grow_into_unknown is True
     assert node_settings({"updater": {"threshold": 6}})[1].grow_into_unknown is True
     assert node_settings({}, {"updater": {"threshold": 6}})[1].grow_into_unknown is False
+
+
+def test_the_method_is_the_papers_unless_the_parameter_names_another():
+    assert node_settings({})[0].method == "paper"
+    assert node_settings({"method": "hybrid"})[0].method == "hybrid"
+
+
+def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_cells():
+    """What ``_publish`` hands to /diagnostics, built without ROS: a still robot's scans, the
+    first processed, the rest refused by the gate (too soon, then no motion)."""
+    from gridmap import Pose2D
+    from scenarios.methods import make_method
+    from scenarios.pipeline import RobotPipeline
+    from scenarios.ros1.node import Health, pipeline_values
+
+    try:
+        import synthetic_room as world
+    except ImportError:
+        from tests import synthetic_room as world
+
+    box = world.Rect(6.0, 5.0, 6.6, 5.6)
+    ref = world.rasterise(world.room_walls() + [box])
+    robot = Pose2D(3.0, 5.3, 0.0)
+    values = {}
+    for method in ("paper", "fuse"):
+        pipeline = RobotPipeline(make_method(method, ref))
+        for k in range(10):
+            scan = world.full_scan(world.room_walls(), robot, 0.1 * k)
+            pipeline.step(scan, Pose2D(0.0, 0.0, 0.0), odometry=robot, pose=robot)
+        values[method] = dict(Health().values(pipeline_values(pipeline, method)))
+    paper = values["paper"]
+    assert paper["method"] == "paper" and paper["scans_processed"] == "1"
+    assert paper["scans_gated"] == "9"
+    assert (paper["gated_by: interval"], paper["gated_by: no motion"]) == ("2", "7")
+    # the box's face, seen once: a changed flag each, short of the threshold
+    pending = int(paper["pending_cells"])
+    assert pending == int(paper["pending_few_observations"]) > 5
+    assert paper["pending_outvoted"] == "0"
+    fuse = values["fuse"]
+    assert fuse["method"] == "fuse" and fuse["gated_by: no motion"] == "7"
+    assert "pending_cells" not in fuse          # log-odds mapping keeps no flag buffers

@@ -7,7 +7,10 @@ is given. Publishes: ``map_updated`` (nav_msgs/OccupancyGrid, latched) every
 ``~publish_period`` seconds when it changed, ``map_updated_updates``
 (map_msgs/OccupancyGridUpdate: the box of cells that changed since the last publication, what
 costmap_2d's static layer reads with ``subscribe_to_updates``), and the node's health on
-``/diagnostics``. Services (std_srvs/Trigger): ``~save``, ``~commit``, ``~reset``.
+``/diagnostics`` (``pipeline_values``: the method, the scans by fate, the gate's refusals by
+rule, the evidence of change left below the threshold). Services (std_srvs/Trigger):
+``~save``, ``~commit``, ``~reset``. ``~method`` chooses what updates the map: the paper's
+updater (the default), ``fuse`` or ``hybrid`` (``scenarios.methods``).
 
 Scans are queued by the subscriber and processed in order by one worker thread, so a slow
 scan never blocks ROS's callbacks; past ``~queue_size`` waiting scans the oldest is dropped
@@ -61,14 +64,32 @@ class Health:
         self.times: collections.deque = collections.deque(maxlen=500)   # [s] per scan
 
     def values(self, pipeline_counts: dict) -> list[tuple[str, str]]:
+        """(key, value) pairs: the node's counters, then ``pipeline_counts`` (a dict value, as
+        ``gated_by``, one pair per entry: "gated_by: fast turn"), then what was skipped."""
         t = np.asarray(self.times) * 1e3
         out = [(k, str(v)) for k, v in sorted(self.counts.items())]
-        out += [(k, str(v)) for k, v in pipeline_counts.items()]
+        for k, v in pipeline_counts.items():
+            if isinstance(v, dict):
+                out += [(f"{k}: {name}", str(n)) for name, n in sorted(v.items())]
+            else:
+                out.append((k, str(v)))
         out += [(f"skipped: {k}", str(v)) for k, v in sorted(self.skipped.items())]
         if t.size:
             out += [("scan_time_ms_mean", f"{t.mean():.3f}"), ("scan_time_ms_max",
                                                               f"{t.max():.3f}")]
         return out
+
+
+def pipeline_values(pipeline, method: str) -> dict:
+    """What /diagnostics shows of the pipeline: the method, its counters (the gate's refusals
+    by rule in ``gated_by``) and, for the paper's updater, the cells whose evidence of change
+    stayed below the threshold (``pending_cells``, of them ``pending_few_observations`` and
+    ``pending_outvoted``; counted over the whole map at each publication, as the map is)."""
+    out = {"method": method, **pipeline.counts.as_dict()}
+    evidence = getattr(pipeline.updater, "evidence_summary", None)
+    if evidence is not None:
+        out.update(evidence())
+    return out
 
 
 class MapUpdaterNode:
@@ -95,15 +116,16 @@ class MapUpdaterNode:
         needed)."""
         from localization.confidence import PoseCheck
         from localization.smoothing import PoseSmoother
-        from updater import MapUpdater
 
+        from ..methods import make_method
         from ..pipeline import RobotPipeline
 
         check = PoseCheck(reference, self.pose_check_config) \
             if self.settings.use_pose_check else None
         smoother = PoseSmoother(self.settings.smooth_poses) \
             if self.settings.smooth_poses > 0 else None
-        self.pipeline = RobotPipeline(MapUpdater(reference, self.updater_config),
+        self.pipeline = RobotPipeline(make_method(self.settings.method, reference,
+                                                  self.updater_config),
                                       pose_check=check, smoother=smoother)
         self._published = None                   # publish the new map at the next period
 
@@ -221,7 +243,7 @@ class MapUpdaterNode:
                 return
             grid = self.pipeline.updater.updated_map()
             before, self._published = self._published, grid.data
-            counts = self.pipeline.counts.as_dict()
+            counts = pipeline_values(self.pipeline, self.settings.method)
         if before is None or not np.array_equal(before, grid.data):
             self.map_pub.publish(self._grid_msg(grid))
             box = None if before is None else changed_box(before, grid.data)
@@ -323,7 +345,8 @@ class MapUpdaterNode:
         rospy.on_shutdown(self._log_summary)
 
     def _log_summary(self) -> None:
-        counts = self.pipeline.counts.as_dict() if self.pipeline is not None else {}
+        counts = pipeline_values(self.pipeline, self.settings.method) \
+            if self.pipeline is not None else {}
         text = ", ".join(f"{k} {v}" for k, v in self.health.values(counts))
         self.ros["rospy"].loginfo(f"map_updater: {text}")
 

@@ -33,6 +33,7 @@ class NodeSettings:
     queue_size: int = 200                # scans waiting to be processed; older ones dropped
     use_pose_check: bool = False         # as `mapupdate update --pose-check`
     smooth_poses: float = 2.0            # [s] as `mapupdate update --smooth-poses`; 0: off
+    method: str = "paper"                # as `mapupdate update --method`: paper, fuse, hybrid
 
     def __post_init__(self):
         for name in ("map_frame", "odom_frame", "base_frame", "map_topic", "save_path"):
@@ -56,6 +57,9 @@ class NodeSettings:
         if not isinstance(self.use_pose_check, bool):
             raise NodeSettingsError(f"parameter '~use_pose_check' must be true or false, got "
                                     f"{self.use_pose_check!r}")
+        from ..methods import ROBOT_METHODS, check_method
+
+        check_method(self.method, "parameter '~method'", ROBOT_METHODS)
 
 
 def node_settings(params: dict, base=None):

@@ -38,7 +38,7 @@ from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, P
                      load_map, save_map)
 from gridmap.atomic import write_atomically
 
-from .scores import near
+from .scores import ObservationCounter, near
 
 BOX_SIDE = (0.4, 1.2)         # [m] a box's sides are drawn from this range
 CLEARANCE = 0.3               # [m] of free map around a box, and between boxes
@@ -60,7 +60,16 @@ MAX_COUNT = 100               # boxes or people of one kind a case may ask for
 FLASER_NO_RETURN = 81.83
 CARMEN_RANGE_MIN = 0.01
 CASE_FILES = ("stale.yaml", "stale.pgm", "log.clf", "truth.npz", "case.yaml")
-TRUTH_MASKS = ("removed_outline", "removed_interior", "added_outline", "added_all", "people")
+TRUTH_MASKS = ("removed_outline", "removed_seen", "removed_interior", "added_outline", "added_all",
+               "people")
+# [m] the updater's removed-obstacle walk stops this short of a return (removed_skip_min): a
+# removed box's outline cell counts as seen when a beam passes through it that far before its
+# return
+WALK_SKIP = 0.15
+# Scores are also given on the outline cells seen by at least this many scans: the fewest on
+# which any rule of the updater decides (its unanimous rule; the paper's threshold is 7)
+FEW_VIEWS = 3
+MAX_WALK = 100.0       # [m] longer than any lidar's range
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)   # fixed member times: the same case is the same bytes
 
 
@@ -624,9 +633,10 @@ def make_case(grid: OccupancyGrid, observations: Iterable, seed: int, removed: i
                                         min_views, none=True))
     times, time_note = scan_times([o.time for o, _ in used])
     walkers, people_note = _people(grid, placer, people, times, rng)
-    ranges, views, ends = _edited_scans(used, placer.boxes, walkers, times, progress)
+    ranges, views, ends, through = _edited_scans(grid, used, placer.boxes, walkers, times,
+                                                 progress)
     boxes = tuple(PlacedBox(b.kind, b.box, int(v), b.pair) for b, v in zip(placer.boxes, views))
-    truth = _truth(grid, boxes, walkers, ends)
+    truth = _truth(grid, boxes, walkers, ends, through)
     stale = grid.data.copy()
     stale[truth["removed_outline"]] = OCCUPIED
     stale[truth["removed_interior"]] = UNKNOWN
@@ -652,12 +662,15 @@ def _shortfall_text(asked: dict, placed: dict, min_views: int, none: bool = Fals
     return f"only {', '.join(short)} boxes fit ({rule})"
 
 
-def _edited_scans(used, boxes: Sequence[PlacedBox], people, times, progress: bool):
+def _edited_scans(grid: OccupancyGrid, used, boxes: Sequence[PlacedBox], people, times,
+                  progress: bool):
     """Every scan with the added boxes and the people cut in: (ranges, views of each box,
-    end points (x, y) of the beams that end on an added box)."""
+    end points (x, y) of the beams that end on an added box, and per cell the scans whose
+    beams pass through it on their way to a return beyond a removed box)."""
     added = _box_params([b.box for b in boxes if b.added])
     removed = _box_params([b.box for b in boxes if not b.added])
     seen_added, seen_removed = np.zeros(len(added), int), np.zeros(len(removed), int)
+    through = ObservationCounter(grid, max_range=MAX_WALK)
     out, ends = [], []
     for i, (obs, pose) in enumerate(_bar(progress, iterable=used, desc="editing scans",
                                          unit="scan")):
@@ -668,19 +681,29 @@ def _edited_scans(used, boxes: Sequence[PlacedBox], people, times, progress: boo
         seen_added += np.bincount(which[on_box], minlength=len(added)) >= MIN_BEAMS
         if len(removed):
             t = box_entry(pose.x, pose.y, angles, removed)
+            r = ranges.astype(np.float64)
             with np.errstate(invalid="ignore"):
-                passes = t < np.minimum(ranges.astype(np.float64), obs.scan.range_max)
+                passes = (t < r) & (r < obs.scan.range_max)
             seen_removed += passes.sum(axis=1) >= MIN_BEAMS
+            # every return's walk, stopped short of it: a beam may cross an outline cell's
+            # corner without entering the box
+            with np.errstate(invalid="ignore"):
+                ret = np.isfinite(r) & (r < obs.scan.range_max) & (r > WALK_SKIP)
+            through.add_scan(pose, r[ret] - WALK_SKIP, angles[ret] - pose.theta)
         a, t = angles[on_box], box_t[on_box]
         ends.append(np.c_[pose.x + t * np.cos(a), pose.y + t * np.sin(a)])
     views, ia, ir = [], iter(seen_added), iter(seen_removed)
     for b in boxes:
         views.append(next(ia) if b.added else next(ir))
-    return out, views, np.concatenate(ends) if ends else np.zeros((0, 2))
+    return out, views, ends, through.counts
 
 
-def _truth(grid: OccupancyGrid, boxes: Sequence[PlacedBox], people, ends) -> dict:
-    """The truth masks on the map's grid (``TRUTH_MASKS``) and the reference map's cells."""
+def _truth(grid: OccupancyGrid, boxes: Sequence[PlacedBox], people, ends,
+           through: np.ndarray) -> dict:
+    """The truth masks on the map's grid (``TRUTH_MASKS``), the scans that saw each outline
+    cell (``removed_views``: beams passed through it to a return beyond; ``added_views``:
+    beams ended on it) and the reference map's cells. ``ends``: per scan, the end points of
+    its beams on added boxes; ``through``: per cell, the scans whose beams pass through it."""
     masks = {k: np.zeros(grid.shape, bool) for k in TRUTH_MASKS}
     for b in boxes:
         outline, interior = b.box.masks(grid)
@@ -689,20 +712,40 @@ def _truth(grid: OccupancyGrid, boxes: Sequence[PlacedBox], people, ends) -> dic
         else:
             masks["removed_outline"] |= outline
             masks["removed_interior"] |= interior
-    masks["added_outline"] = seen_cells(grid, masks["added_all"], ends[:, 0], ends[:, 1])
+    added_views = hit_counts(grid, masks["added_all"], ends)
+    masks["added_outline"] = added_views > 0
+    masks["removed_seen"] = masks["removed_outline"] & (through > 0)
+    views = {"removed_views": np.where(masks["removed_outline"], through, 0).astype(np.uint16),
+             "added_views": np.minimum(added_views, 65535).astype(np.uint16)}
     masks["people"] = people_mask(grid, people)
-    return {**masks, "reference": grid.data.copy(),
+    return {**masks, **views, "reference": grid.data.copy(),
             "resolution": np.float64(grid.resolution), "origin": np.array(grid.origin)}
 
 
+def hit_counts(grid: OccupancyGrid, outline: np.ndarray, ends) -> np.ndarray:
+    """Per cell of ``outline``, the scans with a beam ending on it (``ends``: per scan, the
+    (x, y) end points of its beams on boxes), as ``seen_cells`` places an end point."""
+    counts = np.zeros(grid.data.size, np.int32)
+    for xy in ends:
+        rows, cols = outline_cells(grid, outline, xy[:, 0], xy[:, 1])
+        counts[np.unique(rows * grid.width + cols)] += 1
+    return counts.reshape(grid.shape)
+
+
 def seen_cells(grid: OccupancyGrid, outline: np.ndarray, x, y) -> np.ndarray:
-    """The cells of ``outline`` that beams ending at (x, y) hit: for each end point on a box's
-    boundary, the outline cell nearest to it among the 3 x 3 cells around it (the point's own
-    cell may lie just outside the cells whose centres the box covers)."""
+    """The cells of ``outline`` that beams ending at (x, y) hit (``outline_cells``)."""
     seen = np.zeros(grid.shape, bool)
+    seen[outline_cells(grid, outline, x, y)] = True
+    return seen
+
+
+def outline_cells(grid: OccupancyGrid, outline: np.ndarray, x, y):
+    """(rows, cols) of the cells of ``outline`` that beams ending at (x, y) hit: for each end
+    point on a box's boundary, the outline cell nearest to it among the 3 x 3 cells around it
+    (the point's own cell may lie just outside the cells whose centres the box covers)."""
     x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
     if x.size == 0:
-        return seen
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     r, c = grid.world_to_cell(x, y)
     dr, dc = (v.ravel() for v in np.mgrid[-1:2, -1:2])
     rows, cols = r[:, None] + dr, c[:, None] + dc
@@ -712,8 +755,7 @@ def seen_cells(grid: OccupancyGrid, outline: np.ndarray, x, y) -> np.ndarray:
     d = np.where(ok, np.hypot(cx - x[:, None], cy - y[:, None]), np.inf)
     k = d.argmin(axis=1)
     hit = np.isfinite(d[np.arange(k.size), k])
-    seen[rows[hit, k[hit]], cols[hit, k[hit]]] = True
-    return seen
+    return rows[hit, k[hit]], cols[hit, k[hit]]
 
 
 # --- the case folder ---------------------------------------------------------------------------
@@ -891,7 +933,7 @@ def load_case(case_dir) -> tuple[OccupancyGrid, dict]:
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise CaseError(f"{d / 'truth.npz'}: cannot read it ({' '.join(str(e).split())})") \
             from None
-    for k in (*TRUTH_MASKS, "reference"):
+    for k in (*TRUTH_MASKS, "removed_views", "added_views", "reference"):
         if k not in truth or truth[k].shape != stale.shape:
             raise CaseError(f"{d / 'truth.npz'}: no {k} of the stale map's {stale.width} x "
                             f"{stale.height} cells")
@@ -903,8 +945,9 @@ def _share(hits: np.ndarray) -> float | None:
 
 
 def score_case(case_dir, updated: OccupancyGrid) -> dict:
-    """Scores of an updated map against a case (see docs/edited_world.md): removed_freed,
-    added_drawn (shares, None with no cell to score), false_occupied, walls_freed, ghosts
+    """Scores of an updated map against a case (see docs/edited_world.md): removed_freed (of
+    the removed boxes' outline cells a beam passes through), removed_freed_all (of their whole
+    outline), added_drawn (shares, None with no cell to score), false_occupied, walls_freed, ghosts
     (cells), and the number of cells in each truth mask."""
     stale, truth = load_case(case_dir)
     if not updated.same_frame(stale):
@@ -912,16 +955,26 @@ def score_case(case_dir, updated: OccupancyGrid) -> dict:
                         f"({_frame(stale)})")
     u, s = updated.data, stale.data
     occupied = u == OCCUPIED
-    false_occupied = occupied & (s != OCCUPIED) & ~near(truth["added_all"])
+    removed_few = truth["removed_views"] >= FEW_VIEWS
+    added_few = truth["added_views"] >= FEW_VIEWS
+    # where the user's map does not know the floor, a drawn cell is growth, not an error
+    drawn = occupied & (s != OCCUPIED) & ~near(truth["added_all"])
+    false_occupied = drawn & (truth["reference"] != UNKNOWN)
     walls = (s == OCCUPIED) & (truth["reference"] == OCCUPIED)
     scores = {
-        "removed_freed": _share(u[truth["removed_outline"]] == FREE),
+        "removed_freed": _share(u[truth["removed_seen"]] == FREE),
+        "removed_freed_all": _share(u[truth["removed_outline"]] == FREE),
+        f"removed_freed_{FEW_VIEWS}": _share(u[removed_few] == FREE),
+        f"added_drawn_{FEW_VIEWS}": _share(near(occupied)[added_few]),
         "added_drawn": _share(near(occupied)[truth["added_outline"]]),
         "false_occupied": int(false_occupied.sum()),
         "walls_freed": int((walls & (u == FREE)).sum()),
         "ghosts": int((false_occupied & truth["people"]).sum()),
+        "grown_occupied": int((drawn & (truth["reference"] == UNKNOWN)).sum()),
     }
-    return scores | {f"{k}_cells": int(truth[k].sum()) for k in TRUTH_MASKS}
+    return scores | {f"{k}_cells": int(truth[k].sum()) for k in TRUTH_MASKS} | {
+        f"removed_seen_{FEW_VIEWS}_cells": int(removed_few.sum()),
+        f"added_outline_{FEW_VIEWS}_cells": int(added_few.sum())}
 
 
 def _frame(g: OccupancyGrid) -> str:
@@ -936,13 +989,23 @@ def score_lines(scores: dict) -> list[str]:
 
     return [f"{'score':<16}{'value':>8}  of",
             f"{'removed_freed':<16}{share(scores['removed_freed']):>8}  "
-            f"{scores['removed_outline_cells']} outline cells of removed boxes",
+            f"{scores['removed_seen_cells']} seen outline cells of removed boxes",
+            f"{'  all outline':<16}{share(scores['removed_freed_all']):>8}  "
+            f"{scores['removed_outline_cells']} outline cells, seen through or not",
+            f"{'  seen 3+ times':<16}{share(scores[f'removed_freed_{FEW_VIEWS}']):>8}  "
+            f"{scores[f'removed_seen_{FEW_VIEWS}_cells']} of them seen through by "
+            f"{FEW_VIEWS} scans or more",
             f"{'added_drawn':<16}{share(scores['added_drawn']):>8}  "
             f"{scores['added_outline_cells']} seen outline cells of added boxes",
+            f"{'  seen 3+ times':<16}{share(scores[f'added_drawn_{FEW_VIEWS}']):>8}  "
+            f"{scores[f'added_outline_{FEW_VIEWS}_cells']} of them hit by {FEW_VIEWS} scans "
+            "or more",
             f"{'false_occupied':<16}{scores['false_occupied']:>8}  cells",
             f"{'walls_freed':<16}{scores['walls_freed']:>8}  cells",
             f"{'ghosts':<16}{scores['ghosts']:>8}  cells ({scores['people_cells']} cells "
-            "people covered)"]
+            "people covered)",
+            f"{'grown_occupied':<16}{scores['grown_occupied']:>8}  cells drawn where the map "
+            "knows nothing (not scored)"]
 
 
 def write_scores(scores: dict, path) -> None:

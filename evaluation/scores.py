@@ -148,3 +148,28 @@ def ape_statistics(estimated_xy, true_xy) -> dict:
         "min": float(e.min()), "rmse": float(math.sqrt(np.mean(e * e))),
         "sse": float(np.sum(e * e)), "std": float(e.std()),
     }
+
+
+def growth_scores(before, after, whole, counts: np.ndarray, min_views: int = MIN_OBSERVATIONS
+                  ) -> dict:
+    """How an update grew a partial map ``before`` into ``after``, against ``whole`` (a map of
+    all of the place), on the cells unknown in ``before``, known in ``whole`` and observed by
+    at least ``min_views`` of the update's scans (``counts``, e.g. ``ObservationCounter``):
+    the share that became known (``known``) and known right (``agreeing``: free where the
+    whole map is free, occupied within one cell of its occupied cells), the share of the
+    whole map's surfaces among them drawn (``surfaces_drawn``), and the occupied cells of
+    ``before`` freed (``freed``; ``freed_also_in_whole``: of them, occupied in the whole map
+    too)."""
+    b, a, w = _cells(before), _cells(after), _cells(whole)
+    unknown = (b == UNKNOWN) & (counts >= min_views) & (w != UNKNOWN)
+    out = a[unknown]
+    right_free = (out == FREE) & (w[unknown] == FREE)
+    right_occupied = (out == OCCUPIED) & near(w == OCCUPIED)[unknown]
+    occupied = b == OCCUPIED
+    surfaces = w[unknown] == OCCUPIED
+    n = int(unknown.sum())
+    return {"cells": n, "known": float((out != UNKNOWN).mean()) if n else math.nan,
+            "agreeing": float((right_free | right_occupied).mean()) if n else math.nan,
+            "surfaces_drawn": float(right_occupied[surfaces].mean()) if surfaces.any() else 0.0,
+            "freed": int((occupied & (a == FREE)).sum()),
+            "freed_also_in_whole": int((occupied & (w == OCCUPIED) & (a == FREE)).sum())}

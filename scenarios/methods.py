@@ -41,6 +41,8 @@ mapping has none (the hybrid has the paper's, since the paper's updater runs ins
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -149,7 +151,8 @@ class GatedMethod(MapOutput):
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
         if self.config.gating:
-            reason = self._gate.check(t, gate_pose, odometry is not None)
+            fov = math.degrees(abs(scan.angle_increment)) * len(scan.ranges)
+            reason = self._gate.check(t, gate_pose, odometry is not None, fov)
             if reason:
                 self.stats["gated"] += 1
                 return ScanReport(t, ScanStatus.GATED, reason)

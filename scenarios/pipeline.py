@@ -35,6 +35,7 @@ class PipelineCounts:
     scans_refused_by_pose_check: int = 0  # the pose check refused their pose
     scans_gated: int = 0                  # not processed: the updater's gate refused them
     gated_by: dict = field(default_factory=dict)   # ... by the gate's rule (ScanReport.reason)
+    scans_confirming: int = 0             # ... of them, used to confirm M (gate_confirm)
     scans_off_map: int = 0                # not processed: the sensor pose lay off the map
     localizer_updates: int = 0            # scans the localiser ran a filter update on
     scans_not_tracking: int = 0           # withheld: the localiser was lost or converging
@@ -147,3 +148,4 @@ class RobotPipeline:
         if report.status is ScanStatus.GATED:
             c.scans_gated += 1
             c.gated_by[report.reason] = c.gated_by.get(report.reason, 0) + 1
+            c.scans_confirming += report.unchanged_flags > 0

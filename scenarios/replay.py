@@ -578,7 +578,11 @@ def _gate_text(s: dict, brief: bool = False) -> str:
     rules = sorted((s.get("gated_by") or {}).items(), key=lambda kv: (-kv[1], kv[0]))
     listed = ", ".join(f"{rule} {n}" for rule, n in rules)
     head = f"the gate refused {gated} of {s.get('scans_used', gated)} scans"
-    return f"{head} ({listed})" if brief else f"{head}: {listed}"
+    text = f"{head} ({listed})" if brief else f"{head}: {listed}"
+    if s.get("scans_confirming"):
+        text += (f"; {s['scans_confirming']} of them, views already taken, confirmed the "
+                 "map's surfaces")
+    return text
 
 
 def _pending_text(s: dict, brief: bool = False) -> str:
@@ -627,6 +631,10 @@ def _warnings(s: dict) -> list[str]:
         out.append(f"the pose check refused {g('scans_refused_by_pose_check')} of the {asked} "
                    "scans past the gate: their poses disagree with the map (drifted odometry? "
                    "try --poses localizer)")
+    if g("format") in ("ros1", "ros2") and (g("timestamps") or {}).get("earlier_than_before"):
+        out.append("the bag's clock went back: tf and odometry are looked up at the scans' "
+                   "stamps, which now stand for two moments of the recording, so scans may be "
+                   "placed at poses of the other; check the trajectory (--trajectory)")
     if g("scans_processed", 0) and g("scans_dropped_as_lost", 0) > 0.5 * g("scans_processed"):
         out.append(f"the lost check dropped {g('scans_dropped_as_lost')} of the "
                    f"{g('scans_processed')} scans processed: most beams disagree with the map "

@@ -294,6 +294,36 @@ def test_every_box_is_seen_by_min_views_scans_of_the_edited_log(world, case):
         assert abs(seen - views) <= 2, (kind, seen, views)   # 1 cm steps of the march
 
 
+def test_removed_views_count_the_scans_whose_beams_pass_through_each_outline_cell(case):
+    """Counted again by marching every beam of the edited log in 1 cm steps up to its return
+    less the updater's walk skip (0.15 m): the scans that pass through each outline cell of a
+    removed box. Cells a march and a grid traversal see differently (a beam grazing a corner)
+    are few."""
+    truth = np.load(case / "truth.npz")
+    outline, views = truth["removed_outline"], truth["removed_views"]
+    stale = load_map(case / "stale.yaml")
+    counts = np.zeros(stale.shape, int)
+    for a in observations(case / "log.clf"):
+        p, r = a.sensor, a.scan.ranges.astype(np.float64)
+        ok = np.isfinite(r) & (r < a.scan.range_max)
+        angles = a.scan.angles()[ok] + p.theta
+        hit = np.zeros(stale.shape, bool)
+        for reach, angle in zip(r[ok] - ew.WALK_SKIP, angles):
+            d = np.arange(0.0, max(reach, 0.0), 0.01)
+            rows, cols = stale.world_to_cell(p.x + d * np.cos(angle), p.y + d * np.sin(angle))
+            inside = stale.contains(rows, cols)
+            hit[rows[inside], cols[inside]] = True
+        counts += hit & outline
+    march, traversal = counts[outline], views[outline].astype(int)
+    assert outline.sum() > 50 and (traversal > 0).mean() > 0.9
+    # a traversal enters every cell a beam touches, a 1 cm march may step over a corner
+    assert (np.abs(march - traversal) <= np.maximum(2, 0.1 * traversal)).mean() >= 0.95
+    assert abs(march.sum() - traversal.sum()) <= 0.05 * traversal.sum()
+    assert (views[~outline] == 0).all()
+    assert (truth["removed_seen"] == (outline & (views > 0))).all()
+    assert (truth["added_outline"] == (truth["added_views"] > 0)).all()
+
+
 def test_the_stale_map_has_each_removed_box_drawn_as_a_slam_map_shows_it(world, case):
     ref, stale = load_map(world[0]), load_map(case / "stale.yaml")
     truth = np.load(case / "truth.npz")

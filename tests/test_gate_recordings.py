@@ -57,16 +57,31 @@ def test_a_dense_fast_turn_still_holds_scans_back_briefly():
     assert resumed and resumed[0] * 0.1 <= 1.0 + ROBOT.gate_recovery_time + 0.5
 
 
-def test_turning_in_place_gives_at_most_gate_turn_views_views():
+def test_turning_in_place_is_processed_until_the_headings_cover_the_circle():
     # 20 deg/s in place at 10 Hz for two full turns, then 1 m straight on
     track = [(0.1 * k, Pose2D(0.0, 0.0, math.radians(2.0 * k))) for k in range(360)]
     track += [(36.0 + 0.1 * k, Pose2D(0.05 * k, 0.0, 0.0)) for k in range(1, 21)]
-    reasons = run_gate(ROBOT, track)
-    assert reasons[:360].count("") == 1 + ROBOT.gate_turn_views    # the first, then two turns
+    g, reasons = Gate(ROBOT), []
+    for t, pose in track:                            # a lidar of 180 deg
+        reason = g.check(t, pose, True, 180.0)
+        if reason == "":
+            g.mark_processed(t, pose)
+        reasons.append(reason)
+    # a view each time the heading moved gate_min_rotation_deg (in steps of 2 deg), while
+    # 180 deg + one such turn are not yet swept
+    rot = ROBOT.gate_min_rotation_deg
+    turns = reasons[:360].count("") - 1
+    assert (180 + rot) / (rot + 2) - 1 <= turns <= (180 + rot) / rot
     assert reasons.count(GATED_TURN_VIEWS) > 0
-    assert reasons[360:].count("") >= 2                # moving again resets the count
+    assert reasons[360:].count("") >= 2              # moving again starts afresh
+    g = Gate(ROBOT)                                  # a lidar of 360 deg: no view from turning
+    g.check(0.0, Pose2D(0, 0, 0), True, 360.0)
+    g.mark_processed(0.0, Pose2D(0, 0, 0))
+    full = [g.check(0.1 * k, Pose2D(0, 0, math.radians(2.0 * k)), True, 360.0)
+            for k in range(1, 360)]
+    assert full.count("") == 0 and full.count(GATED_TURN_VIEWS) > 100
     unlimited = run_gate(UpdaterConfig(gate_fast_turn_deg_s=3600.0), track)
-    assert unlimited[:360].count("") == 1 + 2 * 360 // 45 - 1     # every 45 deg
+    assert unlimited[:360].count("") == 1 + 2 * 360 // 45 - 1     # every 45 deg, twice round
 
 
 def _stand_still(config, scans=60):

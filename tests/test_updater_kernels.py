@@ -635,7 +635,16 @@ def ref_decide_all(hist, data, mask, threshold, support, seen=None, few=0):
     n = np.vectorize(lambda v: ref_popcount(int(v) & mask))(hist)
     changed = n >= threshold
     if few:
-        changed |= (n >= few) & (seen < threshold) & (n == seen) & (data != UNK)
+        occ = data == OCC
+        conf = occ & (seen > 0) & (n < np.minimum(seen, ref_popcount(mask)))
+        pad = np.pad(conf, 1)
+        h, w = data.shape
+        near_conf = np.zeros_like(conf)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr or dc:
+                    near_conf |= pad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+        changed |= (n >= few) & (seen < threshold) & (n == seen) & ~(occ & near_conf)
     if support:
         occ = data != FREE
         strong = n >= threshold
@@ -663,7 +672,8 @@ def test_push_flags_against_reference():
     ch_marks, un_marks = np.full(63, 255, np.uint8), np.full(63, 255, np.uint8)
     moved = np.zeros(280, np.int32)
     seen = np.zeros(500, np.uint8)
-    n = K.push_flags(hist, seen, changed, unchanged, 0x3FF, 7, 0, ch_marks, un_marks, moved)
+    n = K.push_flags(hist, seen, np.zeros(500, np.int8), changed, unchanged, 0x3FF, 7, 0,
+                     ch_marks, un_marks, moved)
     flags = np.bincount(np.concatenate([changed, unchanged]), minlength=500)
     assert (seen == flags).all()
     expect = before.astype(int)
@@ -700,7 +710,7 @@ def test_decide_incremental_equals_full_map(support, few):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
-        n = K.push_flags(hist, seen, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved)
+        n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved)
         count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support)
         expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support,
                                 seen.reshape(30, 30), few)
@@ -747,8 +757,23 @@ def test_unanimous_rule_for_few_observations():
     assert decide(0b1111, 4, 5) == 0 and decide(0b1111, 4, 0) == 0
     assert decide(0b11110, 5, 3) == 0
     assert decide(0b1111110, 7, 3) == 0 and decide(0b1111111, 7, 0) == 1
-    data[1, 1] = UNK         # an unknown cell of M needs the threshold: its interior may be
-    assert decide(0b1111, 4, 3) == 0     # an unmapped room, not an object
+    data[1, 1] = UNK         # an unknown cell of M seen through by every scan: the same
+    assert decide(0b1111, 4, 3) == 1
+
+
+def test_unanimous_rule_keeps_a_grazed_cell_of_a_surface_the_scans_still_hit():
+    # a wall row of M; its middle cell seen through by 4 scans and never hit
+    data = np.zeros((3, 3), np.int8)
+    data[1, :] = OCC
+    flat = data.reshape(-1)
+    hist = np.zeros(9, np.uint16)
+    seen = np.zeros(9, np.uint8)
+    hist[4], seen[4] = 0b1111, 4
+    assert K.decide_cell(hist, seen, flat, np.zeros(2, np.uint8), 4, 3, 0x3FF, 7, 3, False) == 1
+    seen[3] = 5              # its neighbour was hit by 5 scans (unchanged flags): the wall is
+    assert K.decide_cell(hist, seen, flat, np.zeros(2, np.uint8), 4, 3, 0x3FF, 7, 3, False) == 0
+    hist[3] = 0b11111        # ... unless every flag of the neighbour said changed too: a box
+    assert K.decide_cell(hist, seen, flat, np.zeros(2, np.uint8), 4, 3, 0x3FF, 7, 3, False) == 1
 
 
 # --- output and last check --------------------------------------------------------------------

@@ -492,12 +492,13 @@ def flag_listed_unchanged(cells, marks, out, n):
 
 
 @njit(cache=True)
-def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, hit_marks,
+def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, few, hit_marks,
               drawn):
     """The hit buffers of open unknown cells, ``hitbuf = ((hitbuf << 1) | hit) & mask``: 1 for
     each cell hit this scan, 0 for each seen through (its changed flag); then the ``drawn``
-    bit, hits in at least ``threshold`` of the last observations. Clears ``hit_marks``.
-    Returns the change of the number of drawn cells."""
+    bit: hits in at least ``threshold`` of the last observations, or (``few`` > 0) only hits
+    since the first, at least ``few`` of them. Clears ``hit_marks``. Returns the change of
+    the number of drawn cells."""
     delta = 0
     n_changed = changed.shape[0]
     for k in range(n_changed + hit_cells.shape[0]):
@@ -509,7 +510,7 @@ def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, h
             idx, flag = hit_cells[k - n_changed], 1
             hit_marks[idx >> 3] = 0
         hitbuf[idx] = ((hitbuf[idx] << 1) | flag) & mask
-        now = popcount16(hitbuf[idx]) >= threshold
+        now = is_drawn(hitbuf[idx], mask, threshold, few)
         if now != (bit_get(drawn, idx) == 1):
             drawn[idx >> 3] = drawn[idx >> 3] ^ (1 << (idx & 7))
             delta += 1 if now else -1
@@ -517,11 +518,19 @@ def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, h
 
 
 @njit(cache=True)
-def decide_drawn(hitbuf, ref_flat, enclosed, mask, threshold, drawn):
+def is_drawn(h, mask, threshold, few):
+    """A hit buffer that draws its cell: ``threshold`` hits among the last observations, or
+    with ``few`` > 0 nothing but hits (the low bits all set), at least ``few``."""
+    n = popcount16(h & mask)
+    return n >= threshold or (few > 0 and n >= few and (h & (h + 1)) == 0)
+
+
+@njit(cache=True)
+def decide_drawn(hitbuf, ref_flat, enclosed, mask, threshold, few, drawn):
     """The ``drawn`` bits over the whole map (on loading a saved state). Returns the count."""
     total = 0
     for idx in range(ref_flat.shape[0]):
-        if hitbuf[idx] and popcount16(hitbuf[idx] & mask) >= threshold and \
+        if hitbuf[idx] and is_drawn(hitbuf[idx], mask, threshold, few) and \
                 is_open_unknown(ref_flat, enclosed, idx):
             drawn[idx >> 3] = drawn[idx >> 3] | (1 << (idx & 7))
             total += 1
@@ -541,7 +550,7 @@ def apply_drawn(drawn, out):
 
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
-def push_flags(hist, seen, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
+def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
                out_moved):
     """Shift the scan's flags into the buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255) and
@@ -558,35 +567,60 @@ def push_flags(hist, seen, changed, unchanged, mask, threshold, few, ch_marks, u
         else:
             idx, flag = unchanged[k - n_changed], 0
             un_marks[idx >> 3] = 0
+        old = hist[idx]
+        watched = few > 0 and ref[idx] == OCC
+        if old == 0 and flag == 0 and not watched:
+            if seen[idx] < 255:
+                seen[idx] += 1
+            continue            # an unchanged flag into an all-unchanged buffer: no change
+        was = watched and confirmed(hist, seen, ref, idx, mask)
         if seen[idx] < 255:
             seen[idx] += 1
-        old = hist[idx]
-        if old == 0 and flag == 0:
-            continue            # an unchanged flag into an all-unchanged buffer: no change
         new = ((old << 1) | flag) & mask
         hist[idx] = new
         p_old, p_new = popcount16(old), popcount16(new)
-        if p_old != p_new:
-            crossed = (p_old >= threshold) != (p_new >= threshold)
-            out_moved[n] = -1 - idx if crossed else idx
+        crossed = (p_old >= threshold) != (p_new >= threshold)
+        if watched and was != confirmed(hist, seen, ref, idx, mask):
+            crossed = True      # its neighbours' unanimous rule changed too
+        if crossed:
+            out_moved[n] = -1 - idx
             n += 1
-        elif few > 0 and seen[idx] <= threshold:
+        elif p_old != p_new or (few > 0 and seen[idx] <= threshold):
             out_moved[n] = idx
             n += 1
     return n
 
 
 @njit(cache=True)
+def confirmed(hist, seen, ref, idx, mask):
+    """An occupied cell of M whose recent flags are not all changed: a surface the scans still
+    see. The unanimous rule frees no occupied cell next to one."""
+    if ref[idx] != OCC or seen[idx] == 0:
+        return False
+    window = popcount16(mask)
+    return popcount16(hist[idx] & mask) < min(int(seen[idx]), window)
+
+
+@njit(cache=True)
 def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support):
     """Apply the decision rule to cell ``idx`` (flat arrays) and update its decided bit: changed
     when n_c >= T; or, with ``few`` > 0, when the cell was observed fewer than T times, at least
-    ``few`` times, and every flag it got says changed; or, with ``support``, when n_c plus its
+    ``few`` times, and every flag it got says changed (an occupied cell of M only if no occupied
+    8-neighbour is ``confirmed``: a wall grazed by a few beams keeps its cells); or, with ``support``, when n_c plus its
     8-neighbours of the same two-state (free / occupied-or-unknown) in ``ref`` with n >= T
     reaches T. Returns +1, -1 or 0, the change of the number of changed cells."""
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
     if not changed and few > 0:
-        changed = n >= few and seen[idx] < threshold and n == seen[idx] and ref[idx] != UNK
+        changed = n >= few and seen[idx] < threshold and n == seen[idx]
+        if changed and ref[idx] == OCC:     # not a cell of a surface the scans still see
+            height = ref.shape[0] // width
+            row, col = idx // width, idx % width
+            for rr in range(max(row - 1, 0), min(row + 2, height)):
+                for cc in range(max(col - 1, 0), min(col + 2, width)):
+                    j = rr * width + cc
+                    if j != idx and confirmed(hist, seen, ref, j, mask):
+                        changed = False
     if not changed and support:
         height = ref.shape[0] // width
         row, col = idx // width, idx % width
@@ -613,7 +647,7 @@ def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support
     for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
         delta += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
-        if moved[k] >= 0 or not support:
+        if moved[k] >= 0 or not (support or few > 0):
             continue
         row, col = idx // width, idx % width
         for rr in range(max(row - 1, 0), min(row + 2, height)):

@@ -29,7 +29,7 @@ BOUNDS = {
     "gate_min_rotation_deg": (0.0, 360.0), "gate_fast_turn_deg_s": (1e-3, 3600.0),
     "gate_recovery_time": (0.0, 3600.0), "gate_recovery_distance": (0.0, 1000.0),
     "gate_velocity_window": (0.0, 60.0), "gate_velocity_max_dt": (0.0, 3600.0),
-    "gate_turn_views": (0, 1000), "max_range": (1e-3, 100.0), "cast_margin": (0.0, 5.0),
+"max_range": (1e-3, 100.0), "cast_margin": (0.0, 5.0),
     "virtual_to_measured_ratio": (1, 16), "window_deg": (0.0, 45.0),
     "pairing_distance_near": (1e-3, 5.0), "pairing_range_near": (0.0, 100.0),
     "pairing_distance_slope": (0.0, 1.0), "pairing_distance_max": (1e-3, 5.0),
@@ -56,10 +56,11 @@ class UpdaterConfig:
     gate_recovery_distance: float = 1.6      # [m] ... and until this far travelled
     gate_velocity_window: float = 0.3        # [s] without odometry: poses differenced over this
     # Not in the authors' code (gating.py): the angular velocity is judged only over pose
-    # samples at most this far apart (3600: any), and a robot turning without moving gets at
-    # most gate_turn_views scans processed for its turning until it moves (0: no limit).
+    # samples at most this far apart (3600: any), and with gate_turn_cover a robot turning
+    # without moving gets scans processed for its turning only until the headings seen from
+    # there cover the circle.
     gate_velocity_max_dt: float = 3600.0     # [s]
-    gate_turn_views: int = 0
+    gate_turn_cover: bool = False
     # Not in the authors' code (MapUpdater._confirm): a scan held back as a view already
     # taken (too soon, no motion, turning in place) still gives its unchanged flags.
     gate_confirm: bool = False
@@ -122,7 +123,8 @@ class UpdaterConfig:
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
 
     def __post_init__(self):
-        for name in ("gating", "gate_confirm", "neighbour_support", "last_check", "fill_gaps",
+        for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
+                     "last_check", "fill_gaps",
                      "grow_into_unknown", "confirm_hit_surfaces"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "

@@ -25,7 +25,7 @@ GATED_INTERVAL = "interval"      # too soon after the last processed scan
 GATED_NO_MOTION = "no motion"    # neither moved nor turned enough since then
 GATED_FAST_TURN = "fast turn"    # idle after a fast turn
 GATED_TIME_BACK = "time went backwards"   # the gate restarts from this scan
-GATED_TURN_VIEWS = "turning in place"     # turned, but as many views as allowed from here
+GATED_TURN_VIEWS = "turning in place"     # turned, but every heading was seen from here
 SKIPPED_OFF_MAP = "sensor off the map"    # not gating: the scan cannot be classified
 # Scans held back as a view already taken: with ``gate_confirm`` their unchanged flags are used.
 CONFIRMING = frozenset({GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS})
@@ -36,7 +36,7 @@ CONFIRMING = frozenset({GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS})
 TIME_TOLERANCE = 1e-6
 
 _FIELDS = ("source", "last_t", "last_x", "last_y", "last_th", "proc_t", "proc_x", "proc_y",
-           "proc_th", "idle", "idle_t", "travel", "turn_views")
+           "proc_th", "idle", "idle_t", "travel", "turn_swept")
 
 
 class Gate:
@@ -57,11 +57,14 @@ class Gate:
         self.idle = False          # shut after a fast turn
         self.idle_t = math.nan     # time of the last fast turn
         self.travel = 0.0          # [m] travelled since then
-        self.turn_views = 0        # scans processed for turning alone since the last move
-        self._by_turn = False      # the scan just let through was for turning alone
+        self.turn_swept = 0.0      # [deg] turned by scans processed for turning alone, since
+                                   # the last one processed for moving
+        self._by_turn = False      # the scan just let through was for turning alone ...
+        self._turn = 0.0           # [deg] ... by this much since the last processed
 
-    def check(self, t: float, pose: Pose2D, from_odometry: bool) -> str:
-        """"" when the scan at time ``t`` [s] may be processed, else why not."""
+    def check(self, t: float, pose: Pose2D, from_odometry: bool, fov_deg: float = 360.0) -> str:
+        """"" when the scan at time ``t`` [s] may be processed, else why not. ``fov_deg``: the
+        angle the scan covers (for ``gate_turn_cover``)."""
         source = "odometry" if from_odometry else "localised"
         if source != self.source:
             self.source = source
@@ -75,11 +78,11 @@ class Gate:
             self._observe_motion(t, pose, from_odometry)
         if math.isnan(self.proc_t):
             return ""
-        return self._reason(t, pose)
+        return self._reason(t, pose, fov_deg)
 
     def mark_processed(self, t: float, pose: Pose2D) -> None:
         self.proc_t, self.proc_x, self.proc_y, self.proc_th = t, pose.x, pose.y, pose.theta
-        self.turn_views = self.turn_views + 1 if self._by_turn else 0
+        self.turn_swept = self.turn_swept + self._turn if self._by_turn else 0.0
 
     def _sample(self, t, pose):
         self.last_t, self.last_x, self.last_y, self.last_th = t, pose.x, pose.y, pose.theta
@@ -97,7 +100,7 @@ class Gate:
             self.idle, self.idle_t, self.travel = True, t, 0.0
         self._sample(t, pose)
 
-    def _reason(self, t, pose):
+    def _reason(self, t, pose, fov_deg):
         cfg = self.config
         if self.idle:
             rested = t - self.idle_t >= cfg.gate_recovery_time - TIME_TOLERANCE
@@ -110,8 +113,9 @@ class Gate:
         moved = math.hypot(pose.x - self.proc_x, pose.y - self.proc_y) >= cfg.gate_min_distance
         turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))
         turned = turn >= cfg.gate_min_rotation_deg
-        self._by_turn = turned and not moved
-        if self._by_turn and cfg.gate_turn_views and self.turn_views >= cfg.gate_turn_views:
+        self._by_turn, self._turn = turned and not moved, turn
+        circle = 360.0 - min(fov_deg, 360.0) + cfg.gate_min_rotation_deg
+        if self._by_turn and cfg.gate_turn_cover and self.turn_swept + turn > circle:
             return GATED_TURN_VIEWS
         return "" if moved or turned else GATED_NO_MOTION
 
@@ -120,7 +124,7 @@ class Gate:
         return {name: getattr(self, name) for name in _FIELDS}
 
     def restore(self, state: dict) -> None:
-        state = {"turn_views": 0, **state}     # states saved before the rule had none
+        state = {"turn_swept": 0.0, **state}     # states saved before the rule had none
         missing = [name for name in _FIELDS if name not in state]
         if missing:
             raise ValueError(f"gate state lacks {missing}")

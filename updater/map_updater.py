@@ -161,11 +161,11 @@ class MapUpdater:
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
         if cfg.gating:
-            reason = self._gate.check(t, gate_pose, odometry is not None)
+            fov = math.degrees(abs(scan.angle_increment)) * len(scan.ranges)
+            reason = self._gate.check(t, gate_pose, odometry is not None, fov)
             if reason:
                 self._counts["gated"] += 1
-                n_un = self._confirm(scan, sensor_pose, pose_check) \
-                    if reason in CONFIRMING else 0
+                n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
                 return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
                                   changed_cells=self._n_changed)
         sensor, status, reason = self._sensor_for_scan(sensor_pose, pose_check)
@@ -210,8 +210,8 @@ class MapUpdater:
             n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
         hist = self._hist.reshape(-1)
         seen = self._seen.reshape(-1)
-        n_moved = steps.push_flags(hist, seen, n_ch, n_un, cfg, self._ch_marks, self._un_marks,
-                                   ws)
+        n_moved = steps.push_flags(hist, seen, ref.reshape(-1), n_ch, n_un, cfg, self._ch_marks,
+                                   self._un_marks, ws)
         self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
                                         ref.shape[1], cfg, ws)
         if grow:
@@ -220,27 +220,27 @@ class MapUpdater:
                                              ws)
         return n_ch, n_new + n_gaps, n_un
 
-    def _confirm(self, scan: Scan, sensor_pose: Pose2D, pose_check=None) -> int:
-        """With ``gate_confirm``: the unchanged flags of a scan the gate held back as a view
-        already taken (the robot has not moved, or only turned), and none of its changed
-        flags. A robot standing still or spinning then cannot fill a buffer with changes seen
-        from one place, and its scans still confirm what the map has right, as the scans
-        around them do. The pose check, when given, vouches for the pose as for any scan.
-        Returns the count of unchanged flags (0 for a scan not confirmed: the option off, the
-        sensor off the map, the pose refused, or the scan lost)."""
+    def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
+        """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the
+        gate held back as a view already taken (the robot has not moved, or only turned) hits,
+        and none of its other flags. A robot standing still or spinning then cannot fill a
+        buffer with changes seen from one place, and its scans still confirm the surfaces it
+        sees, as the scans around them do. (Not their free walks: the pose check, asked only
+        for the scans let through, does not vouch for these poses, and a walk placed a little
+        off crosses the face of a new object.) Returns the count of unchanged flags (0 for a
+        scan not confirmed: the option off, the sensor off the map, or the scan lost)."""
         cfg, ref, ws = self.config, self._ref, self._ws
-        if not cfg.gate_confirm:
-            return 0
-        sensor, status, _ = self._sensor_for_scan(sensor_pose, pose_check)
-        if status is not None:
+        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
+        if not cfg.gate_confirm or not self._on_map(sensor):
             return 0
         beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws)
         if steps.is_lost(beams, cfg, ref):
             return 0
-        n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
         n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
         hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
-        n_moved = steps.push_flags(hist, seen, 0, n_un, cfg, self._ch_marks, self._un_marks, ws)
+        n_moved = steps.push_flags(hist, seen, ref.reshape(-1), 0, n_un, cfg, self._ch_marks,
+                                   self._un_marks, ws)
         self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
                                         ref.shape[1], cfg, ws)
         return n_un
@@ -391,7 +391,7 @@ class MapUpdater:
         if self.config.grow_into_unknown:
             self._n_drawn = int(steps.kernels().decide_drawn(
                 self._hitbuf.reshape(-1), ref, self._enclosed, mask, self.config.threshold,
-                self._drawn))
+                self.config.unanimous_min, self._drawn))
 
     @classmethod
     def load(cls, path) -> MapUpdater:

@@ -314,6 +314,14 @@ def flag_unchanged_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
     return k.flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks, ws.unchanged, n)
 
 
+def flag_unchanged_surfaces(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                            ws: Workspace) -> int:
+    """The occupied half of ``flag_unchanged_cells`` alone: the occupied-or-unknown cells of M
+    among the hit cell and its 4-neighbours of each UNCHANGED beam. Returns the count."""
+    return kernels().flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks,
+                                             ws.unchanged, 0)
+
+
 # --- not in the paper: hits confirm M's surfaces ---------------------------------------------
 def flag_hit_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, marks: np.ndarray,
                       ws: Workspace, n: int) -> int:
@@ -396,10 +404,12 @@ def push_hits(hitbuf_flat: np.ndarray, ref: np.ndarray, enclosed: np.ndarray, n_
               ws: Workspace) -> int:
     """The hit buffers of open unknown cells, N_b flags as the change buffers: 1 for a scan
     that hit the cell, 0 for one that saw through it. A cell hit in T of its last N_b
-    observations is drawn: occupied in the output. Returns the change of the drawn count."""
+    observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
+    many) is drawn: occupied in the output. Returns the change of the drawn count."""
     return int(kernels().push_hits(hitbuf_flat, ref.reshape(-1), enclosed,
                                    ws.hits_unknown[:n_hits], ws.changed[:n_changed],
-                                   buffer_mask(cfg), cfg.threshold, hit_marks, drawn))
+                                   buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
+                                   hit_marks, drawn))
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -407,15 +417,15 @@ def buffer_mask(cfg: UpdaterConfig) -> int:
     return (1 << cfg.buffer_size) - 1
 
 
-def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, n_changed: int, n_unchanged: int,
-               cfg: UpdaterConfig, ch_marks: np.ndarray, un_marks: np.ndarray,
-               ws: Workspace) -> int:
+def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+               n_changed: int, n_unchanged: int, cfg: UpdaterConfig, ch_marks: np.ndarray,
+               un_marks: np.ndarray, ws: Workspace) -> int:
     """Shift the scan's flags into the cells' buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``, and count them in ``seen_flat`` (flags
     a cell ever got, saturating at 255). Only flagged cells are touched. Returns the count of
     entries written to ``ws.moved`` (cells whose decision inputs changed)."""
     ws.for_moved(n_changed + n_unchanged)
-    return kernels().push_flags(hist_flat, seen_flat, ws.changed[:n_changed],
+    return kernels().push_flags(hist_flat, seen_flat, ref_flat, ws.changed[:n_changed],
                                 ws.unchanged[:n_unchanged], buffer_mask(cfg), cfg.threshold,
                                 cfg.unanimous_min, ch_marks, un_marks, ws.moved)
 

@@ -1,0 +1,259 @@
+"""Real scans, edited world: the update on real recordings where the change is known.
+
+For each of the seven Radish buildings (../shared/data/radish, skipped when absent): a map from
+the whole log (``mapupdate map``), then per seed an edited-world case (``mapupdate inject``:
+4 boxes removed, 4 added; again with 4 people walking) and the update of its stale map with its
+edited log by each method, scored with ``mapupdate score``. Methods: ``paper`` with the robot's
+defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``), the same code ungated, ``authors_gate``
+(the updater's own defaults, the authors' gate and the paper's threshold, with the growth into
+the unknown: ``update``'s defaults before the gate for recordings), ``hybrid`` and ``fuse``
+(behind the robot's gate). Prints one row per log, method and people setting (shares pooled over the seeds),
+the pooled figures, and writes ``--out DIR/results.json`` and ``DIR/real_changes.png``.
+Shares are given on the outline cells seen at all (a beam passed through a removed box's
+cell, ended on an added box's cell) and on those seen by 3 scans or more.
+
+Then the partly mapped places: per log, a map of its first 45 % of scans updated with the rest
+by ``mapupdate update``'s defaults; of the formerly unknown cells the rest observes 7 times or
+more (and the whole log's map knows), the share known and right, and the cells occupied in both
+maps that the update freed (``evaluation.growth_scores``).
+
+    python benchmarks/bench_real_changes.py --out runs/real_changes [--seeds 0 1 2] [--logs aces]
+
+Exit 1 when a bar of the real-change issue is missed (pooled freed >= 0.95 and drawn >= 0.85,
+no log below 0.8 and 0.5, no case with more false occupied or wall cells than ungated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+DATA = ROOT.parent / "shared" / "data" / "radish"
+LOGS = ("aces", "acapulco", "csail", "freiburg-079", "freiburg-101", "orebro", "seattle")
+METHODS = ("paper", "ungated", "authors_gate", "hybrid", "fuse")
+PART = 0.45                  # the share of a log its partial map is made of
+
+
+def one_case(job):
+    """Make one case and update it with every method: a list of rows."""
+    from dataclasses import replace
+
+    from evaluation.edited_world import make_case, score_case, write_case
+    from gridmap import load_map
+    from robotlogs import log_observations
+    from scenarios.logmap import map_from_log
+    from scenarios.replay import update_from_log
+    from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+    from updater import UpdaterConfig
+
+    name, seed, people, work, overrides, methods = job
+    log = DATA / f"{name}.log.gz"
+    work = Path(work)
+    map_path = work / f"{name}.yaml"
+    if not map_path.exists():
+        map_from_log(log, map_path, progress=False)
+    case_dir = work / f"{name}-s{seed}-p{people}"
+    case = make_case(load_map(map_path), log_observations(log).observations, seed,
+                     removed=4, added=4, people=people)
+    write_case(case, case_dir, map_path=map_path, log_path=log)
+    robot = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
+    rows = []
+    for method in methods:
+        cfg = {"ungated": replace(robot, gating=False),
+               "authors_gate": UpdaterConfig(grow_into_unknown=True)}.get(method, robot)
+        out = case_dir / f"out-{method}.yaml"
+        s = update_from_log(case_dir / "stale.yaml", case_dir / "log.clf", out,
+                            updater_config=cfg, progress=False,
+                            method=method if method in ("hybrid", "fuse") else "paper")
+        sc = score_case(case_dir, load_map(out))
+        rows.append({"log": name, "seed": seed, "people": people, "method": method,
+                     "processed": s["scans_processed"], "scans": s["scans"], **sc})
+    return rows
+
+
+def pooled(rows, key, count):
+    n = sum(r[count] for r in rows)
+    return sum((r[key] or 0) * r[count] for r in rows) / n if n else float("nan")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("runs/real_changes"))
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--logs", nargs="+", default=list(LOGS))
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--people", type=int, nargs="+", default=[0, 4])
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--no-partly-mapped", action="store_true",
+                    help="skip the partly mapped places")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="updater keys over the robot's defaults (YAML values), to try others")
+    args = ap.parse_args(argv)
+    import yaml
+
+    overrides = {k: yaml.safe_load(v) for k, v in (kv.split("=", 1) for kv in args.set)}
+    if not DATA.is_dir():
+        print(f"skipped: {DATA} not found")
+        return 0
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.logs:                       # maps first, once each
+            from scenarios.logmap import map_from_log
+            map_from_log(DATA / f"{name}.log.gz", Path(tmp) / f"{name}.yaml", progress=False)
+        jobs = [(n, s, p, tmp, overrides, args.methods) for n in args.logs for s in args.seeds
+                for p in args.people]
+        with ProcessPoolExecutor(args.workers) as pool:
+            rows = [r for rows in pool.map(one_case, jobs) for r in rows]
+            grown = [] if args.no_partly_mapped else list(pool.map(
+                partly_mapped, [(n, tmp, overrides) for n in args.logs]))
+    (args.out / "results.json").write_text(json.dumps({"cases": rows, "partly_mapped": grown},
+                                                      indent=1))
+    bars = report(rows, args.out)
+    return max(bars, report_grown(grown)) if grown else bars
+
+
+def partly_mapped(job):
+    """A map of the log's first 45 % of scans on the whole log's frame, updated with the rest
+    (written as a log of its own, so that logs with broken times split by scan order)."""
+    import gzip
+
+    from evaluation.scores import ObservationCounter, growth_scores
+    from gridmap import load_map, save_map
+    from gridmap.mapping import build_map
+    from robotlogs.carmen import read_carmen
+    from scenarios.replay import update_from_log
+    from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+    from updater import UpdaterConfig
+
+    name, work, overrides = job
+    log, work = DATA / f"{name}.log.gz", Path(work)
+    scans = read_carmen(log).scans()
+    cut = int(PART * len(scans))
+    whole = load_map(work / f"{name}.yaml")
+    before = build_map(whole, [(r.scan, r.laser_pose) for r in scans[:cut]])
+    save_map(before, work / f"{name}-part.yaml")
+    lines = gzip.open(log, "rt", errors="replace").read().splitlines()
+    laser = [i for i, line in enumerate(lines) if line.startswith(("FLASER", "ROBOTLASER"))]
+    (work / f"{name}-rest.log").write_text("\n".join(lines[laser[cut]:]) + "\n")
+    cfg = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
+    s = update_from_log(work / f"{name}-part.yaml", work / f"{name}-rest.log",
+                        work / f"{name}-grown.yaml", updater_config=cfg, progress=False)
+    counter = ObservationCounter(before, max_range=cfg.max_range)
+    for r in scans[cut:]:
+        rng = r.scan.ranges.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(rng) & (rng >= r.scan.range_min) & \
+                (rng < min(r.scan.range_max, cfg.max_range))
+        counter.add_scan(r.laser_pose, np.where(ok, rng, 0.0), r.scan.angles())
+    g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole, counter.counts)
+    return {"log": name, "scans": len(scans) - cut, "processed": s["scans_processed"], **g}
+
+
+def report_grown(grown) -> int:
+    print(f"\npartly mapped: a map of the first {PART:.0%} of each log updated with the rest")
+    print("| log | scans | processed | newly seen cells (7+ views) | known | known and right "
+          "| surfaces drawn | occupied cells freed | of them occupied in the whole map |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for g in grown:
+        print(f"| {g['log']} | {g['scans']} | {g['processed']} | {g['cells']} | "
+              f"{g['known']:.3f} | {g['agreeing']:.3f} | {g['surfaces_drawn']:.3f} | "
+              f"{g['freed']} | {g['freed_also_in_whole']} |")
+    ok = all(g["agreeing"] >= 0.8 and g["freed_also_in_whole"] == 0 for g in grown)
+    print(f"partly mapped bars (>= 0.80 known and right on each log, no wall freed) "
+          f"{'met' if ok else 'missed'}")
+    return 0 if ok else 1
+
+
+# (share, cells it is taken over) of each score
+SHARES = {"freed": ("removed_freed", "removed_seen_cells"),
+          "drawn": ("added_drawn", "added_outline_cells"),
+          "freed3": ("removed_freed_3", "removed_seen_3_cells"),
+          "drawn3": ("added_drawn_3", "added_outline_3_cells")}
+
+
+def shares(sel) -> str:
+    return " | ".join(f"{pooled(sel, *SHARES[k]):.3f}" for k in SHARES)
+
+
+def report(rows, out: Path) -> int:
+    k = SHARES
+    print("| log | people | method | scans processed | removed freed | added drawn | removed "
+          "freed (3+ views) | added drawn (3+ views) | false occupied | walls freed | ghosts |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for name in dict.fromkeys(r["log"] for r in rows):
+        for people in sorted({r["people"] for r in rows}):
+            for m in METHODS:
+                sel = [r for r in rows if r["log"] == name and r["people"] == people
+                       and r["method"] == m]
+                if not sel:
+                    continue
+                print(f"| {name} | {people} | {m} | {sum(r['processed'] for r in sel)}/"
+                      f"{sum(r['scans'] for r in sel)} | {shares(sel)} | "
+                      f"{sum(r['false_occupied'] for r in sel)} | "
+                      f"{sum(r['walls_freed'] for r in sel)} | {sum(r['ghosts'] for r in sel)} |")
+    ok = True
+    print("\npooled over the cases (removed freed, added drawn; the same on cells seen 3+ times):")
+    for people in sorted({r["people"] for r in rows}):
+        for m in METHODS:
+            sel = [r for r in rows if r["people"] == people and r["method"] == m]
+            if not sel:
+                continue
+            print(f"  people {people}, {m:8s}: {shares(sel).replace(' | ', ', ')}; false "
+                  f"occupied {sum(r['false_occupied'] for r in sel)}, walls freed "
+                  f"{sum(r['walls_freed'] for r in sel)}, ghosts {sum(r['ghosts'] for r in sel)}")
+        sel = [r for r in rows if r["people"] == people and r["method"] == "paper"]
+        if pooled(sel, *k["freed"]) < 0.95 or pooled(sel, *k["drawn"]) < 0.85:
+            ok = False
+        for name in dict.fromkeys(r["log"] for r in sel):
+            mine = [r for r in sel if r["log"] == name]
+            if pooled(mine, *k["freed"]) < 0.8 or pooled(mine, *k["drawn"]) < 0.5:
+                print(f"  below a log's bar: {name} with {people} people")
+                ok = False
+    worse = [(a["log"], a["seed"], a["people"]) for a in rows if a["method"] == "paper"
+             for b in rows if b["method"] == "ungated" and (b["log"], b["seed"], b["people"])
+             == (a["log"], a["seed"], a["people"])
+             and (a["false_occupied"] > b["false_occupied"] or a["walls_freed"] > b["walls_freed"])]
+    print(f"cases where the defaults have more false occupied or wall cells than ungated: "
+          f"{len(worse)} {worse}")
+    figure(rows, k, out / "real_changes.png")
+    print(f"bars {'met' if ok and not worse else 'missed'}; wrote {out / 'results.json'} and "
+          f"{out / 'real_changes.png'}")
+    return 0 if ok and not worse else 1
+
+
+def figure(rows, k, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    logs = list(dict.fromkeys(r["log"] for r in rows))
+    methods = [m for m in METHODS if any(r["method"] == m for r in rows)]
+    width = 0.8 / len(methods)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+    for ax, what, bar in zip(axes, ("freed", "drawn"), (0.95, 0.85)):
+        for j, m in enumerate(methods):
+            vals = [pooled([r for r in rows if r["log"] == n and r["method"] == m], *k[what])
+                    for n in logs]
+            ax.bar(np.arange(len(logs)) + width * (j - (len(methods) - 1) / 2), vals, width,
+                   label="paper (update's defaults)" if m == "paper" else m)
+        ax.axhline(bar, color="k", linestyle="--", linewidth=0.8)
+        ax.set_xticks(range(len(logs)), logs, rotation=30)
+        ax.set_title("removed boxes: seen outline freed" if what == "freed"
+                     else "added boxes: seen outline drawn")
+        ax.set_ylim(0, 1.05)
+    axes[0].legend(fontsize=8, loc="lower left")
+    fig.suptitle("Real scans, edited world: 7 buildings x 3 seeds x (0, 4 people), pooled")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -7,8 +7,8 @@ edited log by each method, scored with ``mapupdate score``. Methods: ``paper`` w
 defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``), the same code ungated, ``authors_gate``
 (the updater's own defaults, the authors' gate and the paper's threshold, with the growth into
 the unknown: ``update``'s defaults before the gate for recordings), ``hybrid`` and ``fuse``
-(behind the robot's gate). Prints one row per log, method and people setting (shares pooled over the seeds),
-the pooled figures, and writes ``--out DIR/results.json`` and ``DIR/real_changes.png``.
+(behind the robot's gate). Prints one row per log, method and people setting (shares pooled
+over the seeds), the pooled figures, and writes ``--out DIR/results.json`` and ``DIR/real_changes.png``.
 Shares are given on the outline cells seen at all (a beam passed through a removed box's
 cell, ended on an added box's cell) and on those seen by 3 scans or more.
 

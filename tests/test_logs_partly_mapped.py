@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from evaluation.scores import ObservationCounter, growth_scores
-from gridmap import FREE, OCCUPIED, UNKNOWN, load_map, save_map
+from gridmap import UNKNOWN, load_map, save_map
 from gridmap.mapping import build_map
 from robotlogs.carmen import read_carmen
 from robotlogs.rosbag import write_bag

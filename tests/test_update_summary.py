@@ -18,7 +18,7 @@ from scenarios.cli import main
 from scenarios.methods import make_method
 from scenarios.replay import ScanClock, summary_lines, update_from_log
 from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
-from updater import MapUpdater, ScanStatus, UpdaterConfig
+from updater import ScanStatus, UpdaterConfig
 
 try:
     import synthetic_room as world

@@ -260,12 +260,16 @@ def _runs(mask):
 
 
 # --- saving and resuming ----------------------------------------------------------------------
-def test_save_then_load_gives_identical_results(tmp_path):
+@pytest.mark.parametrize("config", [UpdaterConfig(), UpdaterConfig(
+    grow_into_unknown=True, gate_min_distance=0.2, gate_min_rotation_deg=20.0,
+    gate_min_interval=0.0, gate_turn_cover=True, gate_confirm=True, unanimous_min=3)],
+    ids=["paper", "robot"])
+def test_save_then_load_gives_identical_results(tmp_path, config):
     walls = world.room_walls()
     box = world.Rect(4.9125, 5.1125, 6.1125, 5.9125)
     ref = world.rasterise(walls, hollow=[box])
     steps = list(world.Drive(seconds=30, seed=3).steps())
-    a = MapUpdater(ref)
+    a = MapUpdater(ref, config)
     for true, noisy, t in steps[:150]:
         a.process(world.full_scan(walls, true, t), noisy, odometry=true)
     path = tmp_path / "state.npz"

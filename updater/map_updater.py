@@ -208,12 +208,7 @@ class MapUpdater:
         n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
         if grow:
             n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
-        hist = self._hist.reshape(-1)
-        seen = self._seen.reshape(-1)
-        n_moved = steps.push_flags(hist, seen, ref.reshape(-1), n_ch, n_un, cfg, self._ch_marks,
-                                   self._un_marks, ws)
-        self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
-                                        ref.shape[1], cfg, ws)
+        self._push_and_decide(n_ch, n_un)
         if grow:
             self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
                                              n_hits, n_ch, cfg, self._hit_marks, self._drawn,
@@ -238,12 +233,17 @@ class MapUpdater:
             return 0
         n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
         n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
-        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
-        n_moved = steps.push_flags(hist, seen, ref.reshape(-1), 0, n_un, cfg, self._ch_marks,
-                                   self._un_marks, ws)
-        self._n_changed += steps.decide(hist, seen, ref.reshape(-1), self._decided, n_moved,
-                                        ref.shape[1], cfg, ws)
+        self._push_and_decide(0, n_un)
         return n_un
+
+    def _push_and_decide(self, n_changed: int, n_unchanged: int) -> None:
+        """The scan's flags listed in the workspace into the buffers, then the decision."""
+        cfg, ref, ws = self.config, self._ref.reshape(-1), self._ws
+        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
+        n_moved = steps.push_flags(hist, seen, ref, n_changed, n_unchanged, cfg, self._ch_marks,
+                                   self._un_marks, ws)
+        self._n_changed += steps.decide(hist, seen, ref, self._decided, n_moved,
+                                        self._ref.shape[1], cfg, ws)
 
     def _sensor_for_scan(self, sensor_pose: Pose2D, pose_check):
         """(sensor (gx, gy, yaw), None, "") for a scan to process: the given pose, or the one the
@@ -299,7 +299,7 @@ class MapUpdater:
 
     def updated_map(self) -> OccupancyGrid:
         """M with the changed cells flipped and the last check applied (O(map); on demand)."""
-        # with the unanimous rule, interiors seen through are not closed (README, "real changes")
+        # with the unanimous rule, interiors seen through are not closed (docs/real_changes.md)
         spare = self._hist if self.config.unanimous_min else None
         cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
                                         self.config.last_check, self._drawn, spare)
@@ -346,8 +346,8 @@ class MapUpdater:
 
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
-        arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks, self._un_marks,
-                  self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
+        arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks,
+                  self._un_marks, self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
         return sum(a.nbytes for a in arrays) + self._ws.nbytes()
 
     # --- stop and resume ----------------------------------------------------------------------

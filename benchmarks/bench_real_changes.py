@@ -46,7 +46,8 @@ def one_case(job):
     """Make one case and update it with every method: a list of rows."""
     from dataclasses import replace
 
-    from evaluation.edited_world import make_case, score_case, write_case
+    from evaluation.case_folder import score_case, write_case
+    from evaluation.edited_world import make_case
     from gridmap import load_map
     from robotlogs import log_observations
     from scenarios.logmap import map_from_log

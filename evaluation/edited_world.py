@@ -11,9 +11,10 @@ stay the recording's own.
 - **people** are discs walking the free space, cut into the scans at each scan's time; they are
   never part of the truth, only a record of where false changes could come from.
 
-``make_case`` places all this (seeded, so a seed gives the same case byte for byte),
-``write_case`` writes the case folder (``stale.yaml`` + ``stale.pgm``, ``log.clf``,
-``truth.npz``, ``case.yaml``), ``score_case`` scores an updated map against it. Geometry is
+``make_case`` places all this (seeded, so a seed gives the same case byte for byte);
+:mod:`evaluation.case_folder` writes the case folder (``stale.yaml`` + ``stale.pgm``,
+``log.clf``, ``truth.npz``, ``case.yaml``) and scores an updated map against it, and
+:mod:`evaluation.edited_geometry` holds the geometry of boxes and discs against beams. Geometry is
 vectorised over the beams of a scan (or of the whole log). Of this project it imports only
 ``gridmap``: observations are anything with the attributes of ``robotlogs.Observation``
 (``time``, ``scan``, ``mount``, ``odom``, ``recorded``, ``sensor``), as
@@ -22,23 +23,16 @@ vectorised over the beams of a scan (or of the whole log). Of this project it im
 
 from __future__ import annotations
 
-import io
-import json
 import math
-import os
-import zipfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
-import yaml
 
-from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D, Scan,
-                     load_map, save_map)
-from gridmap.atomic import write_atomically
+from gridmap import FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D
 
-from .scores import ObservationCounter, near
+from .edited_geometry import Box, box_entry, box_params, cut_in, disc_entry, edit_scans, ray_entry
+from .scores import ObservationCounter
 
 BOX_SIDE = (0.4, 1.2)         # [m] a box's sides are drawn from this range
 CLEARANCE = 0.3               # [m] of free map around a box, and between boxes
@@ -75,150 +69,6 @@ ZIP_TIME = (1980, 1, 1, 0, 0, 0)   # fixed member times: the same case is the sa
 
 class CaseError(MapUpdatingError, ValueError):
     """A case that cannot be made, written or scored; the message names what is wrong."""
-
-
-# --- boxes -------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Box:
-    """A rectangle: centre (cx, cy) [m], sides w (along its yaw) and h [m], yaw [rad]."""
-
-    cx: float
-    cy: float
-    w: float
-    h: float
-    yaw: float
-
-    def local(self, x, y) -> tuple[np.ndarray, np.ndarray]:
-        """Points in the box's frame (origin at its centre, x along w)."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        dx, dy = np.asarray(x, np.float64) - self.cx, np.asarray(y, np.float64) - self.cy
-        return c * dx + s * dy, -s * dx + c * dy
-
-    def distance(self, x, y) -> np.ndarray:
-        """Euclidean distance [m] from points to the box (0 inside and on its boundary)."""
-        lx, ly = self.local(x, y)
-        return np.hypot(np.maximum(np.abs(lx) - self.w / 2, 0.0),
-                        np.maximum(np.abs(ly) - self.h / 2, 0.0))
-
-    def corners(self) -> np.ndarray:
-        """The four corners, (4, 2), counter-clockwise."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        u = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64) * [self.w / 2, self.h / 2]
-        return np.c_[self.cx + c * u[:, 0] - s * u[:, 1], self.cy + s * u[:, 0] + c * u[:, 1]]
-
-    def window(self, grid: OccupancyGrid, margin: float = 0.0):
-        """Cells whose centres are within ``margin`` of the box: (row0, col0, local mask), and
-        whether the grid's edge cut the window (the box then does not fit on the grid)."""
-        reach = math.hypot(self.w, self.h) / 2 + margin + grid.resolution
-        r0, c0 = grid.world_to_cell(self.cx - reach, self.cy - reach)
-        r1, c1 = grid.world_to_cell(self.cx + reach, self.cy + reach)
-        clipped = r0 < 0 or c0 < 0 or r1 >= grid.height or c1 >= grid.width
-        r0, c0 = max(int(r0), 0), max(int(c0), 0)
-        r1, c1 = min(int(r1), grid.height - 1), min(int(c1), grid.width - 1)
-        if r1 < r0 or c1 < c0:
-            return r0, c0, np.zeros((0, 0), bool), True
-        rows, cols = np.mgrid[r0:r1 + 1, c0:c1 + 1]
-        x, y = grid.cell_to_world(rows, cols)
-        return r0, c0, self.distance(x, y) <= margin, bool(clipped)
-
-    def masks(self, grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
-        """(outline, interior) on ``grid``: the cells whose centres the box covers, split into
-        those with an 8-neighbour it does not cover and the rest."""
-        r0, c0, covered, _ = self.window(grid)
-        padded = np.pad(covered, 1)
-        inner = covered.copy()
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                inner &= padded[1 + dr:padded.shape[0] - 1 + dr, 1 + dc:padded.shape[1] - 1 + dc]
-        outline = np.zeros(grid.shape, bool)
-        interior = np.zeros(grid.shape, bool)
-        h, w = covered.shape
-        outline[r0:r0 + h, c0:c0 + w] = covered & ~inner
-        interior[r0:r0 + h, c0:c0 + w] = inner
-        return outline, interior
-
-
-def _box_params(boxes) -> np.ndarray:
-    """Boxes as rows (cx, cy, w, h, yaw); an array of such rows passes through."""
-    if isinstance(boxes, np.ndarray):
-        return boxes.astype(np.float64).reshape(-1, 5)
-    return np.array([[b.cx, b.cy, b.w, b.h, b.yaw] for b in boxes], np.float64).reshape(-1, 5)
-
-
-def box_entry(ox, oy, angle, boxes) -> np.ndarray:
-    """Distance along each ray (origin ``ox, oy``, heading ``angle`` in the world, arrays of
-    one shape (N,) or scalars) to its first crossing of each box's boundary (boxes: a sequence
-    of ``Box`` or rows cx, cy, w, h, yaw): (len(boxes), N), ``inf`` where the ray misses the
-    box. From inside a box the first crossing is where it leaves."""
-    a = np.asarray(angle, np.float64)
-    return _entry(ox, oy, np.cos(a), np.sin(a), _box_params(boxes))
-
-
-def _entry(ox, oy, ca, sa, p: np.ndarray) -> np.ndarray:
-    """``box_entry`` for rays given by their direction's cosine and sine, boxes as rows."""
-    cx, cy, hw, hh, yaw = (p[:, k, None] for k in range(5))
-    hw, hh = hw / 2, hh / 2
-    c, s = np.cos(yaw), np.sin(yaw)
-    px, py = np.asarray(ox, np.float64) - cx, np.asarray(oy, np.float64) - cy
-    lx, ly = c * px + s * py, -s * px + c * py
-    dx, dy = c * ca + s * sa, -s * ca + c * sa
-    tiny = 1e-12
-    dx = np.where(np.abs(dx) < tiny, tiny, dx)
-    dy = np.where(np.abs(dy) < tiny, tiny, dy)
-    tx1, tx2 = (-hw - lx) / dx, (hw - lx) / dx
-    ty1, ty2 = (-hh - ly) / dy, (hh - ly) / dy
-    t_in = np.maximum(np.minimum(tx1, tx2), np.minimum(ty1, ty2))
-    t_out = np.minimum(np.maximum(tx1, tx2), np.maximum(ty1, ty2))
-    hit = (t_in <= t_out) & (t_out > 0)
-    return np.where(hit, np.where(t_in > 0, t_in, t_out), np.inf)
-
-
-def disc_entry(ox, oy, angle, discs) -> np.ndarray:
-    """Distance along each ray to its first crossing of each disc (rows x, y, radius):
-    (len(discs), N), ``inf`` where it misses; a disc holding the ray's origin is ignored
-    (a person cannot stand where the laser is)."""
-    d = np.asarray(discs, np.float64).reshape(-1, 3)
-    px = np.asarray(ox, np.float64) - d[:, 0, None]
-    py = np.asarray(oy, np.float64) - d[:, 1, None]
-    a = np.asarray(angle, np.float64)
-    b = px * np.cos(a) + py * np.sin(a)
-    c = px * px + py * py - d[:, 2, None] ** 2
-    disc = b * b - c
-    t = -b - np.sqrt(np.maximum(disc, 0.0))
-    return np.where((disc >= 0) & (c > 0) & (t > 0), t, np.inf)
-
-
-def cut_ranges(ranges: np.ndarray, t: np.ndarray, range_min: float, range_max: float):
-    """``ranges`` with each beam ending at ``t`` where that is nearer than the reading (or the
-    reading is no return) and the laser could measure it: (float32 ranges, cut mask). An
-    invalid reading (NaN, or below ``range_min``) stays as it is."""
-    r = np.asarray(ranges, np.float64)
-    with np.errstate(invalid="ignore"):
-        cut = (t < r) & (t >= range_min) & (t < range_max)
-    return np.where(cut, t, r).astype(np.float32), cut
-
-
-def edit_scans(scan: Scan, sensor: Pose2D, boxes: Sequence[Box] = (), discs=None) -> np.ndarray:
-    """The ranges ``scan`` would have had, its laser at ``sensor`` (map frame), with ``boxes``
-    and the discs (rows x, y, radius: the people at this scan's time) in the world."""
-    return _edit(scan, sensor, _box_params(boxes), discs)[0]
-
-
-def _edit(scan: Scan, sensor: Pose2D, boxes, discs):
-    """(edited ranges, cut, first box entry, which box, from a box) of one scan."""
-    angles = scan.angles() + sensor.theta
-    n = angles.size
-    boxes = _box_params(boxes)
-    tb = box_entry(sensor.x, sensor.y, angles, boxes) if len(boxes) else np.full((0, n), np.inf)
-    tp = disc_entry(sensor.x, sensor.y, angles, discs) if discs is not None and len(discs) \
-        else np.full((0, n), np.inf)
-    box_t = tb.min(axis=0) if len(tb) else np.full(n, np.inf)
-    which = tb.argmin(axis=0) if len(tb) else np.zeros(n, np.int64)
-    people_t = tp.min(axis=0) if len(tp) else np.full(n, np.inf)
-    ranges, cut = cut_ranges(scan.ranges, np.minimum(box_t, people_t), scan.range_min,
-                             scan.range_max)
-    return ranges, cut, box_t, which, cut & (box_t <= people_t)
 
 
 # --- the scans of a log ------------------------------------------------------------------------
@@ -279,8 +129,8 @@ class _Beams:
             vx, vy = box.cx - self.ox, box.cy - self.oy
             idx = np.flatnonzero((np.abs(vx * self.sa - vy * self.ca) <= reach)
                                  & (vx * self.ca + vy * self.sa >= -reach))
-        return idx, _entry(self.ox[idx], self.oy[idx], self.ca[idx], self.sa[idx],
-                           _box_params([box]))[0]
+        return idx, ray_entry(self.ox[idx], self.oy[idx], self.ca[idx], self.sa[idx],
+                           box_params([box]))[0]
 
     def seeing(self, kind: str, idx, t, ranges: np.ndarray) -> np.ndarray:
         """Which of the beams ``idx`` (entries ``t``) see a box: for an added box those that end
@@ -667,15 +517,15 @@ def _edited_scans(grid: OccupancyGrid, used, boxes: Sequence[PlacedBox], people,
     """Every scan with the added boxes and the people cut in: (ranges, views of each box,
     end points (x, y) of the beams that end on an added box, and per cell the scans whose
     beams pass through it on their way to a return beyond a removed box)."""
-    added = _box_params([b.box for b in boxes if b.added])
-    removed = _box_params([b.box for b in boxes if not b.added])
+    added = box_params([b.box for b in boxes if b.added])
+    removed = box_params([b.box for b in boxes if not b.added])
     seen_added, seen_removed = np.zeros(len(added), int), np.zeros(len(removed), int)
     through = ObservationCounter(grid, max_range=MAX_WALK)
     out, ends = [], []
     for i, (obs, pose) in enumerate(_bar(progress, iterable=used, desc="editing scans",
                                          unit="scan")):
         discs = [(*p.at(times[i]), p.radius) for p in people]
-        ranges, _, box_t, which, on_box = _edit(obs.scan, pose, added, discs)
+        ranges, _, box_t, which, on_box = cut_in(obs.scan, pose, added, discs)
         out.append(ranges)
         angles = obs.scan.angles() + pose.theta
         seen_added += np.bincount(which[on_box], minlength=len(added)) >= MIN_BEAMS
@@ -758,256 +608,6 @@ def outline_cells(grid: OccupancyGrid, outline: np.ndarray, x, y):
     return rows[hit, k[hit]], cols[hit, k[hit]]
 
 
-# --- the case folder ---------------------------------------------------------------------------
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        if a.resolve() == b.resolve():
-            return True
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
-def _map_files(map_path) -> list[Path]:
-    """The map's YAML and, when its YAML can be read, its image."""
-    from gridmap.map_io import read_map_yaml
-
-    try:
-        return [Path(map_path), Path(read_map_yaml(map_path).image)]
-    except (MapUpdatingError, OSError):
-        return [Path(map_path)]
-
-
-def check_case_dir(out_dir, map_path=None, log_path=None) -> None:
-    """Refuse a case folder that is the map or the log, a file, or a folder with something in
-    it (a case is written into a new or empty folder, so nothing is ever overwritten)."""
-    out = Path(out_dir)
-    inputs = ([("map", f) for f in _map_files(map_path)] if map_path is not None else []) + \
-        ([("log", Path(log_path))] if log_path is not None else [])
-    for what, f in inputs:
-        if _same_file(out, f):
-            raise CaseError(f"{out}: the case folder is the {what} {f}; choose another folder")
-    if out.exists() and not out.is_dir():
-        raise CaseError(f"{out}: is a file; the case needs a new or empty folder")
-    if out.is_dir() and any(out.iterdir()):
-        raise CaseError(f"{out}: the folder exists and is not empty; the case needs a new or "
-                        "empty folder")
-
-
-def write_case(case: Case, out_dir, *, map_path, log_path) -> Path:
-    """Write the case folder: ``stale.yaml`` + ``stale.pgm``, ``log.clf``, ``truth.npz`` and,
-    last, ``case.yaml``; each file through a temporary file in the folder, renamed into place."""
-    out = Path(out_dir)
-    check_case_dir(out, map_path, log_path)
-    out.mkdir(parents=True, exist_ok=True)
-    save_map(case.stale, out / "stale.yaml")
-    write_atomically(out / "log.clf", log_text(case))
-    write_atomically(out / "truth.npz", npz_bytes(case.truth))
-    record = case_record(case, map_path, log_path)
-    write_atomically(out / "case.yaml", yaml.safe_dump(record, sort_keys=False,
-                                                       default_flow_style=None))
-    return out
-
-
-def npz_bytes(arrays: dict) -> bytes:
-    """``numpy.savez_compressed``'s format with fixed member times: the same arrays give the
-    same bytes (``np.load`` reads it)."""
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, a in arrays.items():
-            member = io.BytesIO()
-            np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=ZIP_TIME)
-            info.compress_type = zipfile.ZIP_DEFLATED
-            z.writestr(info, member.getvalue())
-    return buf.getvalue()
-
-
-def case_record(case: Case, map_path, log_path) -> dict:
-    """What ``case.yaml`` holds."""
-    boxes = []
-    for b in case.boxes:
-        entry = {"kind": b.kind, "centre": [b.box.cx, b.box.cy], "size": [b.box.w, b.box.h],
-                 "yaw": b.box.yaw, "views": b.views}
-        if b.pair is not None:
-            entry["pair"] = b.pair
-        boxes.append(entry)
-    return {"seed": case.seed, "map": str(Path(map_path).resolve()),
-            "log": str(Path(log_path).resolve()), "scans": len(case.observations),
-            "scans_without_pose": case.dropped, "min_views": case.min_views,
-            "asked": dict(case.asked), "placed": case.placed(), "boxes": boxes,
-            "people": len(case.people),
-            "people_radius": [round(p.radius, 3) for p in case.people],
-            "notes": list(case.notes)}
-
-
-# --- the edited log ----------------------------------------------------------------------------
-
-def is_flaser(scan: Scan) -> bool:
-    """True when the scan has the geometry the CARMEN reader gives a FLASER line of its beams."""
-    n = scan.beams
-    inc = math.pi / max(n - 1, 1) if n % 2 == 1 else math.pi / max(n, 1)
-    return (abs(scan.angle_min + math.pi / 2) < 1e-12 and abs(scan.angle_increment - inc) < 1e-12
-            and scan.range_max == FLASER_NO_RETURN and scan.range_min == CARMEN_RANGE_MIN)
-
-
-def range_words(ranges: np.ndarray, no_return: float, below: float | None = None) -> str:
-    """Readings as CARMEN text: the fewest digits that read back as the same float32, no return
-    (inf or at least ``no_return``) as ``no_return``, NaN as ``nan``, and readings below
-    ``below`` (invalid in the scan) as 0."""
-    a = np.asarray(ranges, np.float32).astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        none = a >= no_return
-        if below is not None:
-            a = np.where(a < below, 0.0, a)
-    a = np.where(none, 0.0, a)
-    short = np.char.mod("%.6g", a)
-    exact = (short.astype(np.float32) == a.astype(np.float32)) | np.isnan(a)
-    words = short.astype(object)
-    words[~exact] = np.char.mod("%.9g", a[~exact]).astype(object)
-    words[none] = repr(float(no_return))
-    return " ".join(words.tolist())
-
-
-def laser_line(obs, sensor: Pose2D, ranges: np.ndarray) -> str:
-    """One scan as a CARMEN line the reader gives back at the same laser and odometry poses:
-    FLASER for its geometry, ROBOTLASER1 (own angles and range limit) for any other."""
-    scan = obs.scan
-    odom = obs.odom if obs.odom is not None else sensor
-    t = repr(float(obs.time))
-    poses = " ".join(repr(float(v)) for v in (sensor.x, sensor.y, sensor.theta,
-                                              odom.x, odom.y, odom.theta))
-    if is_flaser(scan):
-        return f"FLASER {scan.beams} {range_words(ranges, FLASER_NO_RETURN)} {poses} {t} inject {t}"
-    fov = (scan.beams - 1) * scan.angle_increment
-    head = (f"ROBOTLASER1 0 {scan.angle_min!r} {fov!r} {scan.angle_increment!r} "
-            f"{float(scan.range_max)!r} 0 0 {scan.beams}")
-    words = range_words(ranges, float(scan.range_max), float(scan.range_min))
-    return f"{head} {words} 0 {poses} 0 0 0 0 0 {t} inject {t}"
-
-
-def log_text(case: Case) -> str:
-    """The edited log: a comment, then one laser line per scan in the log's order."""
-    head = [f"# edited-world case, seed {case.seed}: {len(case.boxes)} boxes and "
-            f"{len(case.people)} people cut into the scans of the recording"]
-    lines = [laser_line(o, p, r) for o, p, r in zip(case.observations, case.sensors, case.ranges)]
-    return "\n".join(head + lines) + "\n"
-
-
-def case_lines(case: Case, out_dir) -> list[str]:
-    """What the command line prints after writing a case."""
-    flaser = sum(is_flaser(o.scan) for o in case.observations)
-    kinds = "FLASER" if flaser == len(case.observations) else \
-        "ROBOTLASER1" if flaser == 0 else "FLASER and ROBOTLASER1"
-    p = case.placed()
-    out = [f"wrote {out_dir}: stale.yaml, log.clf ({len(case.observations)} scans, {kinds}), "
-           f"truth.npz, case.yaml",
-           f"  placed {p['removed']} removed, {p['added']} added, {p['moved']} moved boxes and "
-           f"{p['people']} people (asked {case.asked['removed']}, {case.asked['added']}, "
-           f"{case.asked['moved']}, {case.asked['people']})"]
-    for b in case.boxes:
-        pair = "" if b.pair is None else f" (pair {b.pair + 1})"
-        out.append(f"  {b.kind + pair:<16} centre ({b.box.cx:8.3f}, {b.box.cy:8.3f}) m  "
-                   f"{b.box.w:.2f} x {b.box.h:.2f} m  yaw {math.degrees(b.box.yaw):5.1f} deg  "
-                   f"seen by {b.views} scans")
-    if case.dropped:
-        out.append(f"  {case.dropped} scans without a recorded pose left out")
-    return out + [f"  note: {n}" for n in case.notes]
-
-
-# --- scoring -----------------------------------------------------------------------------------
-
-def load_case(case_dir) -> tuple[OccupancyGrid, dict]:
-    """The stale map and the truth arrays of a case folder."""
-    d = Path(case_dir)
-    if not d.is_dir():
-        raise CaseError(f"{d}: no such case folder")
-    for name in ("stale.yaml", "truth.npz"):
-        if not (d / name).is_file():
-            raise CaseError(f"{d}: not a case folder (no {name})")
-    stale = load_map(d / "stale.yaml")
-    try:
-        with np.load(d / "truth.npz", allow_pickle=False) as z:
-            truth = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise CaseError(f"{d / 'truth.npz'}: cannot read it ({' '.join(str(e).split())})") \
-            from None
-    for k in (*TRUTH_MASKS, "removed_views", "added_views", "reference"):
-        if k not in truth or truth[k].shape != stale.shape:
-            raise CaseError(f"{d / 'truth.npz'}: no {k} of the stale map's {stale.width} x "
-                            f"{stale.height} cells")
-    return stale, truth
-
-
-def _share(hits: np.ndarray) -> float | None:
-    return float(np.mean(hits)) if hits.size else None
-
-
-def score_case(case_dir, updated: OccupancyGrid) -> dict:
-    """Scores of an updated map against a case (see docs/edited_world.md): removed_freed (of
-    the removed boxes' outline cells a beam passes through), removed_freed_all (of their whole
-    outline), added_drawn (shares, None with no cell to score), false_occupied, walls_freed, ghosts
-    (cells), and the number of cells in each truth mask."""
-    stale, truth = load_case(case_dir)
-    if not updated.same_frame(stale):
-        raise CaseError(f"the updated map ({_frame(updated)}) is not on the case's grid "
-                        f"({_frame(stale)})")
-    u, s = updated.data, stale.data
-    occupied = u == OCCUPIED
-    removed_few = truth["removed_views"] >= FEW_VIEWS
-    added_few = truth["added_views"] >= FEW_VIEWS
-    # where the user's map does not know the floor, a drawn cell is growth, not an error
-    drawn = occupied & (s != OCCUPIED) & ~near(truth["added_all"])
-    false_occupied = drawn & (truth["reference"] != UNKNOWN)
-    walls = (s == OCCUPIED) & (truth["reference"] == OCCUPIED)
-    scores = {
-        "removed_freed": _share(u[truth["removed_seen"]] == FREE),
-        "removed_freed_all": _share(u[truth["removed_outline"]] == FREE),
-        f"removed_freed_{FEW_VIEWS}": _share(u[removed_few] == FREE),
-        f"added_drawn_{FEW_VIEWS}": _share(near(occupied)[added_few]),
-        "added_drawn": _share(near(occupied)[truth["added_outline"]]),
-        "false_occupied": int(false_occupied.sum()),
-        "walls_freed": int((walls & (u == FREE)).sum()),
-        "ghosts": int((false_occupied & truth["people"]).sum()),
-        "grown_occupied": int((drawn & (truth["reference"] == UNKNOWN)).sum()),
-    }
-    return scores | {f"{k}_cells": int(truth[k].sum()) for k in TRUTH_MASKS} | {
-        f"removed_seen_{FEW_VIEWS}_cells": int(removed_few.sum()),
-        f"added_outline_{FEW_VIEWS}_cells": int(added_few.sum())}
-
-
-def _frame(g: OccupancyGrid) -> str:
-    return (f"{g.width} x {g.height} cells at {g.resolution:g} m, origin "
-            f"({g.origin[0]:g}, {g.origin[1]:g})")
-
-
-def score_lines(scores: dict) -> list[str]:
-    """The scores as a short table."""
-    def share(v):
-        return "     -" if v is None else f"{v:6.3f}"
-
-    return [f"{'score':<16}{'value':>8}  of",
-            f"{'removed_freed':<16}{share(scores['removed_freed']):>8}  "
-            f"{scores['removed_seen_cells']} seen outline cells of removed boxes",
-            f"{'  all outline':<16}{share(scores['removed_freed_all']):>8}  "
-            f"{scores['removed_outline_cells']} outline cells, seen through or not",
-            f"{'  seen 3+ times':<16}{share(scores[f'removed_freed_{FEW_VIEWS}']):>8}  "
-            f"{scores[f'removed_seen_{FEW_VIEWS}_cells']} of them seen through by "
-            f"{FEW_VIEWS} scans or more",
-            f"{'added_drawn':<16}{share(scores['added_drawn']):>8}  "
-            f"{scores['added_outline_cells']} seen outline cells of added boxes",
-            f"{'  seen 3+ times':<16}{share(scores[f'added_drawn_{FEW_VIEWS}']):>8}  "
-            f"{scores[f'added_outline_{FEW_VIEWS}_cells']} of them hit by {FEW_VIEWS} scans "
-            "or more",
-            f"{'false_occupied':<16}{scores['false_occupied']:>8}  cells",
-            f"{'walls_freed':<16}{scores['walls_freed']:>8}  cells",
-            f"{'ghosts':<16}{scores['ghosts']:>8}  cells ({scores['people_cells']} cells "
-            "people covered)",
-            f"{'grown_occupied':<16}{scores['grown_occupied']:>8}  cells drawn where the map "
-            "knows nothing (not scored)"]
-
-
-def write_scores(scores: dict, path) -> None:
-    """The scores as JSON, written atomically."""
-    write_atomically(path, json.dumps(scores, indent=2) + "\n")
+__all__ = ["Box", "Case", "CaseError", "PlacedBox", "Person", "box_entry", "disc_entry",
+           "edit_scans", "hit_counts", "laser_pose", "make_case", "outline_cells",
+           "people_mask", "scan_times", "seen_cells"]

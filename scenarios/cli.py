@@ -133,11 +133,11 @@ def _cmd_map(args) -> int:
 
 
 def _cmd_inject(args) -> int:
-    from evaluation import edited_world
+    from evaluation import case_folder, edited_world
     from gridmap import load_map
     from robotlogs import log_observations
 
-    edited_world.check_case_dir(args.out, args.map, args.log)     # before anything is read
+    case_folder.check_case_dir(args.out, args.map, args.log)      # before anything is read
     grid = load_map(args.map)
     found = log_observations(args.log, log_format=args.format, strict=args.strict,
                              scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
@@ -145,24 +145,24 @@ def _cmd_inject(args) -> int:
     case = edited_world.make_case(grid, found.observations, args.seed, removed=args.removed,
                                   added=args.added, moved=args.moved, people=args.people,
                                   min_views=args.min_views, progress=not args.no_progress)
-    edited_world.write_case(case, args.out, map_path=args.map, log_path=args.log)
-    print("\n".join(edited_world.case_lines(case, args.out)))
+    case_folder.write_case(case, args.out, map_path=args.map, log_path=args.log)
+    print("\n".join(case_folder.case_lines(case, args.out)))
     return 0
 
 
 def _cmd_score(args) -> int:
-    from evaluation import edited_world
+    from evaluation import case_folder
     from gridmap import load_map
 
     from .outputs import check_outputs, map_inputs
 
     if args.json is not None:
-        check_outputs({"DIR": [args.case / f for f in edited_world.CASE_FILES],
+        check_outputs({"DIR": [args.case / f for f in case_folder.CASE_FILES],
                        "OUT.yaml": map_inputs(args.updated)}, {"--json": [args.json]})
-    scores = edited_world.score_case(args.case, load_map(args.updated))
-    print("\n".join(edited_world.score_lines(scores)))
+    scores = case_folder.score_case(args.case, load_map(args.updated))
+    print("\n".join(case_folder.score_lines(scores)))
     if args.json is not None:
-        edited_world.write_scores(scores, args.json)
+        case_folder.write_scores(scores, args.json)
         print(f"wrote {args.json}")
     return 0
 

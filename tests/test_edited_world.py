@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from evaluation import case_folder
 from evaluation import edited_world as ew
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan, load_map, save_map
 from robotlogs import Observation, log_observations
@@ -342,7 +343,7 @@ def test_the_same_seed_gives_the_same_case_byte_for_byte_and_another_seed_anothe
     args = ("--removed", 2, "--added", 2, "--moved", 1, "--people", 2)
     for name, seed in (("a", 9), ("b", 9), ("c", 10)):
         assert inject(tmp_path / name, *world, "--seed", seed, *args) == 0
-    for f in ew.CASE_FILES:
+    for f in case_folder.CASE_FILES:
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
     assert (tmp_path / "a" / "log.clf").read_bytes() != (tmp_path / "c" / "log.clf").read_bytes()
     assert (tmp_path / "a" / "case.yaml").read_bytes() != \
@@ -537,7 +538,7 @@ def test_scoring_a_map_of_another_grid_is_refused(case, tmp_path, capsys):
     save_map(OccupancyGrid(stale.data[:-3], stale.resolution, stale.origin),
              tmp_path / "small.yaml")
     save_map(OccupancyGrid(stale.data, stale.resolution, (0.0, 0.0)), tmp_path / "moved.yaml")
-    before = snapshot(*(case / f for f in ew.CASE_FILES))
+    before = snapshot(*(case / f for f in case_folder.CASE_FILES))
     for name in ("small", "moved"):
         assert main(["score", str(case), str(tmp_path / f"{name}.yaml"), "--json",
                      str(tmp_path / "s.json")]) == 2
@@ -565,5 +566,5 @@ def test_aces_takes_four_removed_and_four_added_boxes_and_updates(tmp_path, caps
                  str(tmp_path / "case" / "log.clf"), "--out", str(tmp_path / "up.yaml"),
                  "--poses", "recorded", "--no-progress"]) == 0
     assert "440 scans read, 440 used" in capsys.readouterr().out
-    s = ew.score_case(tmp_path / "case", load_map(tmp_path / "up.yaml"))
+    s = case_folder.score_case(tmp_path / "case", load_map(tmp_path / "up.yaml"))
     assert s["removed_freed"] > 0.5

@@ -592,6 +592,8 @@ def _pending_text(s: dict, brief: bool = False) -> str:
     if not e or not e.get("pending_cells"):
         return ""
     head = f"{e['pending_cells']} cells collected evidence of change below the threshold"
+    if e.get("pending_few_observations") is None:      # the updater did not count flags
+        return head
     few = f"{e['pending_few_observations']} seen by fewer than {e['threshold']} processed scans"
     if brief:
         return f"{head} ({few})"

@@ -113,11 +113,14 @@ def test_the_method_is_the_papers_unless_the_parameter_names_another():
 
 def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_cells():
     """What ``_publish`` hands to /diagnostics, built without ROS: a still robot's scans, the
-    first processed, the rest refused by the gate (too soon, then no motion)."""
+    first processed, the rest refused by the robot's gate (no motion; they confirm the map's
+    surfaces they hit)."""
     from gridmap import Pose2D
     from scenarios.methods import make_method
     from scenarios.pipeline import RobotPipeline
+    from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
     from scenarios.ros1.node import Health, pipeline_values
+    from updater import UpdaterConfig
 
     try:
         import synthetic_room as world
@@ -128,20 +131,25 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     ref = world.rasterise(world.room_walls() + [box])
     robot = Pose2D(3.0, 5.3, 0.0)
     values = {}
-    for method in ("paper", "fuse"):
-        pipeline = RobotPipeline(make_method(method, ref))
+    for method in ("paper", "fuse", "paper's own"):
+        config = UpdaterConfig() if method == "paper's own" else \
+            UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+        pipeline = RobotPipeline(make_method(method.split("'")[0], ref, config))
         for k in range(10):
             scan = world.full_scan(world.room_walls(), robot, 0.1 * k)
             pipeline.step(scan, Pose2D(0.0, 0.0, 0.0), odometry=robot, pose=robot)
         values[method] = dict(Health().values(pipeline_values(pipeline, method)))
     paper = values["paper"]
     assert paper["method"] == "paper" and paper["scans_processed"] == "1"
-    assert paper["scans_gated"] == "9"
-    assert (paper["gated_by: interval"], paper["gated_by: no motion"]) == ("2", "7")
+    assert paper["scans_gated"] == paper["gated_by: no motion"] == "9"
+    assert paper["scans_confirming"] == "9"
     # the box's face, seen once: a changed flag each, short of the threshold
     pending = int(paper["pending_cells"])
     assert pending == int(paper["pending_few_observations"]) > 5
     assert paper["pending_outvoted"] == "0"
     fuse = values["fuse"]
-    assert fuse["method"] == "fuse" and fuse["gated_by: no motion"] == "7"
+    assert fuse["method"] == "fuse" and fuse["gated_by: no motion"] == "9"
     assert "pending_cells" not in fuse          # log-odds mapping keeps no flag buffers
+    own = values["paper's own"]                 # the authors' gate; flags not counted
+    assert (own["gated_by: interval"], own["gated_by: no motion"]) == ("2", "7")
+    assert int(own["pending_cells"]) == pending and "pending_few_observations" not in own

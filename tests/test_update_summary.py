@@ -254,3 +254,17 @@ def test_with_nothing_pending_and_nothing_refused_the_summary_still_says_why():
     s.update(scans_processed=0, scans_off_map=5)
     assert summary_lines(s)[2] == "  0 cells changed: no scan was processed; 5 scans lay off " \
                                   "the map"
+
+
+def test_without_the_unanimous_rule_the_pending_cells_are_counted_not_split(room):
+    """The paper's own configuration keeps no flag counts (a byte per cell less): the summary
+    gives the cells whose evidence stayed below the threshold without saying why."""
+    start = Pose2D(3.5, 5.5, 0.0)
+    log = carmen_log(room / "still2.log", [start] * 10, [0.1 * k for k in range(10)])
+    s = update_from_log(room / "map.yaml", log, room / "still2.yaml", progress=False,
+                        updater_config=UpdaterConfig(grow_into_unknown=True))
+    e = s["evidence"]
+    assert e["pending_cells"] > 20 and e["pending_few_observations"] is None
+    line = next(x for x in summary_lines(s) if "cells collected evidence" in x)
+    assert f"{e['pending_cells']} cells collected evidence of change below the threshold" in line
+    assert "seen by fewer" not in line

@@ -553,13 +553,15 @@ def apply_drawn(drawn, out):
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
                out_moved):
     """Shift the scan's flags into the buffers, changed flags first:
-    ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255) and
+    ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255;
+    an empty ``seen`` counts nothing, and then ``few`` must be 0) and
     clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
     rule for few observations, ``few`` > 0, whose observations are still below the threshold),
     as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
     changed too). Returns the count written."""
     n = 0
     n_changed = changed.shape[0]
+    counting = seen.shape[0] > 0
     for k in range(n_changed + unchanged.shape[0]):
         if k < n_changed:
             idx, flag = changed[k], 1
@@ -570,11 +572,11 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
         old = hist[idx]
         watched = few > 0 and ref[idx] == OCC
         if old == 0 and flag == 0 and not watched:
-            if seen[idx] < 255:
+            if counting and seen[idx] < 255:
                 seen[idx] += 1
             continue            # an unchanged flag into an all-unchanged buffer: no change
         was = watched and confirmed(hist, seen, ref, idx, mask)
-        if seen[idx] < 255:
+        if counting and seen[idx] < 255:
             seen[idx] += 1
         new = ((old << 1) | flag) & mask
         hist[idx] = new

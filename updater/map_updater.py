@@ -124,7 +124,8 @@ class MapUpdater:
         self._res = reference_map.resolution
         self._origin = reference_map.origin
         self._hist = np.zeros(self._ref.shape, np.uint16)
-        self._seen = np.zeros(self._ref.shape, np.uint8)    # flags ever pushed, saturating
+        # flags ever pushed, saturating: only the unanimous rule needs them
+        self._seen = np.zeros(self._ref.shape if config.unanimous_min else (0, 0), np.uint8)
         n_bytes = (self._ref.size + 7) // 8
         self._decided = np.zeros(n_bytes, np.uint8)
         self._ch_marks = np.zeros(n_bytes, np.uint8)
@@ -331,11 +332,15 @@ class MapUpdater:
         ``pending_cells`` (at least one changed flag among the last N_b, not changed in the
         output), of which ``pending_few_observations`` were observed fewer than T times in
         all and ``pending_outvoted`` more often (their unchanged flags outweigh the changed
-        ones). O(map); for summaries, not per scan."""
+        ones); those two are None when the flags are not counted (``unanimous_min`` 0).
+        O(map); for summaries, not per scan."""
         bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
         pending = (self._hist.reshape(-1) != 0) & (bits == 0)
-        few = pending & (self._seen.reshape(-1) < self.config.threshold)
-        n_pending, n_few = int(pending.sum()), int(few.sum())
+        n_pending = int(pending.sum())
+        if not self._seen.size:     # flags not counted (unanimous_min 0): not split
+            return {"pending_cells": n_pending, "pending_few_observations": None,
+                    "pending_outvoted": None}
+        n_few = int((pending & (self._seen.reshape(-1) < self.config.threshold)).sum())
         return {"pending_cells": n_pending, "pending_few_observations": n_few,
                 "pending_outvoted": n_pending - n_few}
 
@@ -371,10 +376,11 @@ class MapUpdater:
         """Take saved buffers (refused unless they fit the map and the configuration) and
         decide every cell from them. A state saved before the flags were counted gives each
         cell with flags the most observations (so none of them is decided by few)."""
-        if seen is None:
-            seen = np.where(hist != 0, 255, 0).astype(np.uint8)
+        if seen is None:            # saved before flags were counted
+            seen = np.where(hist != 0, 255, 0).astype(np.uint8) if self._seen.size else \
+                np.zeros((0, 0), np.uint8)
         if seen.shape != self._seen.shape or seen.dtype != np.uint8:
-            raise UpdaterError(f"{path}: flag counts do not fit the reference map")
+            raise UpdaterError(f"{path}: flag counts do not fit the reference map and config")
         self._seen[...] = seen
         mask = np.uint16(steps.buffer_mask(self.config))
         for name, saved, into in (("buffers", hist, self._hist),

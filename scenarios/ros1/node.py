@@ -88,7 +88,7 @@ def pipeline_values(pipeline, method: str) -> dict:
     out = {"method": method, **pipeline.counts.as_dict()}
     evidence = getattr(pipeline.updater, "evidence_summary", None)
     if evidence is not None:
-        out.update(evidence())
+        out.update({k: v for k, v in evidence().items() if v is not None})
     return out
 
 

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     import sim
 
 SIZE_MIN, SIZE_MAX = (15.0, 10.0), (60.0, 40.0)
+MAX_SESSIONS = 100         # sessions of one scenario (each a few minutes of simulated time)
 ROBOT_RADIUS = 0.35
 LANE_CLEARANCE = 0.3      # [m] beyond the robot's radius: lanes stay clear, as a warehouse keeps them
 OBJECT_GAP = 0.1          # [m] between any two objects
@@ -86,9 +87,10 @@ def check_arguments(size, sessions: int, fov: int) -> tuple[float, float]:
     if not (SIZE_MIN[0] <= w <= SIZE_MAX[0] and SIZE_MIN[1] <= h <= SIZE_MAX[1]):
         raise GenerateError(f"size {w:g} x {h:g} m is outside {SIZE_MIN[0]:g} x "
                             f"{SIZE_MIN[1]:g} to {SIZE_MAX[0]:g} x {SIZE_MAX[1]:g} m")
-    if isinstance(sessions, bool) or not isinstance(sessions, int) or sessions < 2:
-        raise GenerateError(f"sessions must be an integer of at least 2 (the mapping session "
-                            f"W1 and an update session), got {sessions!r}")
+    if isinstance(sessions, bool) or not isinstance(sessions, int) or \
+            not 2 <= sessions <= MAX_SESSIONS:
+        raise GenerateError(f"sessions must be an integer from 2 (the mapping session W1 and "
+                            f"an update session) to {MAX_SESSIONS}, got {sessions!r}")
     if fov not in (270, 360):
         raise GenerateError(f"fov must be 270 or 360, got {fov!r}")
     return w, h

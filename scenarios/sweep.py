@@ -36,6 +36,9 @@ from gridmap import MapUpdatingError
 from gridmap.suggest import did_you_mean
 
 SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
+# The most runs one spec may ask for: a study of 20 warehouses x 3 seeds x 5 methods is 300,
+# and a run of the built-in warehouse takes about 10 s on 2 cores.
+MAX_RUNS = 10_000
 GENERATE_KEYS = ("seeds", "size", "sessions", "fov")
 RESULT_FORMAT = 1
 
@@ -141,6 +144,7 @@ def check_spec(spec: dict, source: str, base: Path) -> dict:
         _integers([out["sessions"]], source, "sessions", minimum=1)
     out["config"] = _base_config(spec.get("config"), source)
     out["grid"] = _grid(spec.get("grid"), out["config"], source)
+    _count_runs(out, source)
     return out
 
 
@@ -218,7 +222,23 @@ def _grid(node, config: dict, source: str) -> dict:
                 section_config(section, {**config.get(section, {}), name: v}, source, where)
             except MapUpdatingError as e:
                 raise SweepError(str(e)) from None
+        if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+            _fail(source, where, f"a value is listed twice: {values}")
     return dict(node)
+
+
+def _count_runs(spec: dict, source: str) -> int:
+    """The runs a checked spec asks for, counted before any is planned; more than ``MAX_RUNS``
+    is refused (a slip of a digit in a seed range or a grid)."""
+    scenarios = sum(len(s["generate"]["seeds"]) if "generate" in s else 1
+                    for s in spec["scenarios"])
+    n = scenarios * len(spec["seeds"]) * len(spec["methods"])
+    for values in spec["grid"].values():
+        n *= len(values)
+    if n > MAX_RUNS:
+        _fail(source, "", f"the spec asks for {n} runs, more than {MAX_RUNS} (scenarios x seeds "
+                          f"x methods x grid points); split it into several studies")
+    return n
 
 
 # --- the runs --------------------------------------------------------------------------------

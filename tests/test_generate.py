@@ -42,7 +42,8 @@ def test_the_smallest_and_largest_buildings(size, fov):
 @pytest.mark.parametrize("kwargs, message", [
     ({"size": (14, 10)}, "outside 15 x 10 to 60 x 40"),
     ({"size": (30, 41)}, "outside"),
-    ({"sessions": 1}, "at least 2"),
+    ({"sessions": 1}, "from 2 .* to 100"),
+    ({"sessions": 1_000_000_000}, "from 2 .* to 100, got 1000000000"),
     ({"fov": 180}, "270 or 360")])
 def test_bad_arguments_are_refused_with_one_line(kwargs, message):
     with pytest.raises(GenerateError, match=message):

@@ -59,6 +59,13 @@ def _sessions(metrics_path: Path) -> list[dict]:
     ("scenarios: [{generate: {seed: [1]}}]\n", "unknown key 'seed' (did you mean 'seeds'?)"),
     ("scenarios: [aws_smal_warehouse]\n", "(did you mean 'aws_small_warehouse'?)"),
     ("scenarios: [{generate: {seeds: [1], size: [10, 10]}}]\n", "outside 15 x 10"),
+    ("scenarios: [aws_small_warehouse]\ngrid: {updater.threshold: [5, 7, 5]}\n",
+     "grid.updater.threshold: a value is listed twice: [5, 7, 5]"),
+    ("scenarios: [aws_small_warehouse]\nseeds: [" + ", ".join(map(str, range(200))) + "]\n"
+     "grid: {updater.threshold: [3, 4, 5, 6, 7], updater.buffer_size: [10, 11, 12, 13, 14, 15, "
+     "16], updater.n_skip: [0, 1]}\n",
+     "the spec asks for 14000 runs, more than 10000"),
+    ("scenarios: [{generate: {seeds: [1], sessions: 1000000000}}]\n", "to 100, got 1000000000"),
 ])
 def test_a_bad_spec_is_refused_with_one_line_before_any_run(tmp_path, capsys, text, message):
     out = tmp_path / "study"

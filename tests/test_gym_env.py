@@ -223,3 +223,58 @@ def test_evaluate_tables_one_row_per_seed(room, m1):
     table = evaluate(RouteFollowingPolicy(), room, seeds=[1, 2], session="W2",
                      reference_map=m1, control_period=0.1)
     assert table.column("seed") == [1, 2] and len(table.scores) == 2
+
+
+# --- hostile constructor arguments: refused before any work, naming the argument and value ----
+def construct(room, m1, **kw):
+    from scenarios.gym.env import WarehouseMapUpdateEnv
+
+    return WarehouseMapUpdateEnv(scenario=room, session="W2", reference_map=m1, **kw)
+
+
+def refused(room, m1, name, value, **kw):
+    with pytest.raises(ValueError) as err:
+        construct(room, m1, **{name: value}, **kw)
+    assert name in str(err.value) and repr(value) in str(err.value), str(err.value)
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("nan"), 0.0, -0.05, 1e6, "0.1", True])
+def test_a_bad_control_period_is_refused(room, m1, value):
+    refused(room, m1, "control_period", value)
+
+
+@pytest.mark.parametrize("value", [-1, 1.5, "3", True])
+def test_a_bad_map_seed_is_refused(room, m1, value):
+    refused(room, m1, "map_seed", value)
+
+
+@pytest.mark.parametrize("value", [0, -2, 10**9, 2.5])
+def test_a_bad_render_scale_is_refused(room, m1, value):
+    refused(room, m1, "render_scale", value, render_mode="rgb_array")
+
+
+def test_a_render_scale_over_the_picture_bound_is_refused(room, m1):
+    from scenarios.gym.env import MAX_RENDER_SIDE
+
+    with pytest.raises(ValueError, match="render_scale 4096 draws"):
+        construct(room, m1, render_mode="rgb_array", render_scale=MAX_RENDER_SIDE)
+
+
+@pytest.mark.parametrize("value", ["human", "rgb", ""])
+def test_an_unknown_render_mode_is_refused(room, m1, value):
+    refused(room, m1, "render_mode", value)
+
+
+@pytest.mark.parametrize("name, value", [
+    ("waypoint_tolerance", -0.1), ("waypoint_tolerance", float("nan")),
+    ("goal_tolerance", -1e-3), ("goal_tolerance", float("inf")),
+    ("lost_distance", float("nan")), ("lost_distance", -0.5), ("lost_distance", "far")])
+def test_bad_tolerances_and_lost_distance_are_refused(room, m1, name, value):
+    refused(room, m1, name, value)
+
+
+def test_good_edge_arguments_are_accepted(room, m1):
+    env = construct(room, m1, control_period=0.1, map_seed=0, render_mode="rgb_array",
+                    render_scale=1, lost_distance=float("inf"), waypoint_tolerance=0.0,
+                    goal_tolerance=0.0)
+    assert env.control_period == pytest.approx(0.1) and env.lost_distance == float("inf")

@@ -5,6 +5,7 @@ robot driven by the agent. The only module of the project that imports gymnasium
 from __future__ import annotations
 
 import math
+import numbers
 from pathlib import Path
 
 import gymnasium as gym
@@ -97,7 +98,8 @@ class WarehouseMapUpdateEnv(gym.Env):
       is given, else M1.
     * ``map_seed``: seed of the mapping run that builds M1 (default: the episode's seed).
     * ``control_period``: [s] how long an action is held, a whole number of physics steps
-      (default one step, 0.05 s in the warehouse: the rate the runner's robot is driven at).
+      (default one step, 0.05 s in the warehouse: the rate the runner's robot is driven at),
+      at most 60 s (``MAX_CONTROL_PERIOD``).
     * ``map_observation``: add the map image to the observation.
     * ``reward_fn``: see Rewards. ``lost_distance`` [m] (0.5).
     * ``waypoint_tolerance`` [m] (0.3), ``goal_tolerance`` [m] (0.05): see Episode End.
@@ -108,7 +110,13 @@ class WarehouseMapUpdateEnv(gym.Env):
       section or key is refused (``ConfigError``) with the nearest valid name.
     * ``updater_config``, ``localizer_config``: as for the runner (not beside the same section
       of ``config``); ``pose_check`` (on): whether the pose check runs.
-    * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2).
+    * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2),
+      a whole number >= 1 that keeps the picture within 4096 px a side (``MAX_RENDER_SIDE``).
+
+    A bad argument is refused with a ``ValueError`` naming it and its value, before any work:
+    a ``control_period`` outside (0, 60] s, NaN or inf; a negative or non-integer ``map_seed``;
+    an unknown ``render_mode``; a NaN or negative ``lost_distance`` (inf: never lost); a
+    negative, NaN or infinite ``waypoint_tolerance`` or ``goal_tolerance``.
     * ``method``: what updates the map, as ``mapupdate run --method``: ``paper`` (the
       updater, default), ``none``, ``remap``, ``fuse`` or ``hybrid`` (``scenarios.methods``);
       an unknown name is refused (``MethodError``) with the nearest valid one.
@@ -141,6 +149,10 @@ class WarehouseMapUpdateEnv(gym.Env):
         from ..methods import check_method
         from ..robot_config import load_robot_config
 
+        _check_arguments(control_period=control_period, map_seed=map_seed,
+                         render_mode=render_mode, render_modes=self.metadata["render_modes"],
+                         render_scale=render_scale, lost_distance=lost_distance,
+                         waypoint_tolerance=waypoint_tolerance, goal_tolerance=goal_tolerance)
         robot = load_robot_config(config, source="config")
         self.method = check_method(method, "method")
         self.scenario = _load_scenario(scenario, quick)
@@ -148,12 +160,12 @@ class WarehouseMapUpdateEnv(gym.Env):
         if self.scenario.sessions[self.session_index].mapping:
             raise sim.ScenarioError(f"session {self.scenario.sessions[self.session_index].name!r}"
                                     f" builds the initial map; choose an update session")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode {render_mode!r} is not one of "
-                             f"{self.metadata['render_modes']}")
         self.render_mode, self.render_scale = render_mode, int(render_scale)
         self._reference = _load_grid(reference_map, "reference_map")
         self._initial = _load_grid(initial_map, "initial_map")
+        if render_mode is not None:
+            _check_render_size(self.render_scale, sim.grid_frame(self.scenario)
+                               if self._reference is None else self._reference)
         self._map_seed = map_seed
         dt = 1.0 / self.scenario.physics_hz
         period = dt if control_period is None else float(control_period)
@@ -321,6 +333,53 @@ class WarehouseMapUpdateEnv(gym.Env):
             "waypoints_reached": int(self._next_waypoint),
             "seed": self._seed,
         }
+
+
+MAX_CONTROL_PERIOD = 60.0     # [s] an action held longer than a minute is a mistake (1e6 hangs)
+MAX_RENDER_SIDE = 4096        # [px] the longest side of a rendered top view
+
+
+def _real(value, name: str) -> float:
+    """``value`` as a float; anything that is not a real number (or is a bool) is refused."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
+def _check_arguments(*, control_period, map_seed, render_mode, render_modes, render_scale,
+                     lost_distance, waypoint_tolerance, goal_tolerance) -> None:
+    """Refuse a bad constructor argument, naming it and its value, before any work."""
+    if control_period is not None:
+        period = _real(control_period, "control_period")
+        if not (math.isfinite(period) and 0.0 < period <= MAX_CONTROL_PERIOD):
+            raise ValueError(f"control_period must be in (0, {MAX_CONTROL_PERIOD:g}] s, got "
+                             f"{control_period!r}")
+    if map_seed is not None and (isinstance(map_seed, bool)
+                                 or not isinstance(map_seed, numbers.Integral) or map_seed < 0):
+        raise ValueError(f"map_seed must be a non-negative integer, got {map_seed!r}")
+    if render_mode is not None and render_mode not in render_modes:
+        raise ValueError(f"render_mode {render_mode!r} is not one of {render_modes} or None")
+    if isinstance(render_scale, bool) or not isinstance(render_scale, numbers.Integral) \
+            or not 1 <= render_scale <= MAX_RENDER_SIDE:
+        raise ValueError(f"render_scale must be a whole number of pixels per cell in "
+                         f"[1, {MAX_RENDER_SIDE}], got {render_scale!r}")
+    if math.isnan(_real(lost_distance, "lost_distance")) or lost_distance < 0:
+        raise ValueError(f"lost_distance must be >= 0 m (inf: never lost), got "
+                         f"{lost_distance!r}")
+    for name, value in (("waypoint_tolerance", waypoint_tolerance),
+                        ("goal_tolerance", goal_tolerance)):
+        tol = _real(value, name)
+        if not (math.isfinite(tol) and tol >= 0.0):
+            raise ValueError(f"{name} must be a finite distance >= 0 m, got {value!r}")
+
+
+def _check_render_size(scale: int, grid: OccupancyGrid) -> None:
+    """Refuse a ``render_scale`` whose top view of ``grid`` would exceed ``MAX_RENDER_SIDE``."""
+    cells = max(grid.width, grid.height)
+    if scale * cells > MAX_RENDER_SIDE:
+        raise ValueError(f"render_scale {scale} draws {scale * cells} px a side (the map is "
+                         f"{cells} cells), over {MAX_RENDER_SIDE}; use at most "
+                         f"{max(1, MAX_RENDER_SIDE // cells)}")
 
 
 def _given_once(section: str, argument, from_config):

@@ -49,11 +49,14 @@ class SessionBagRecorder:
         path = self.out_dir / (f"{name}.bag" if self.fmt == "ros1" else name)
         self._start = BAG_EPOCH + DAY * session     # [s] this session's clock at 0
         # Written under a partial name and renamed when the session ends: a killed run leaves
-        # no bag that looks whole, and its resumed session writes the partial one anew.
+        # no bag that looks whole, and its resumed session writes the partial one anew. A ROS 2
+        # bag names its data file after its folder (metadata.yaml lists it), so it is written
+        # with its final name inside a partial folder: .partial-W2/W2/W2.db3 -> W2/W2.db3.
         partial = path.with_name(f".partial-{path.name}")
         _remove(partial)
-        self._bag = BagWriter(partial, self.fmt).__enter__()
-        self._partial, self.paths[name] = partial, path
+        writing = partial if self.fmt == "ros1" else partial / path.name
+        self._bag = BagWriter(writing, self.fmt).__enter__()
+        self._partial, self._writing, self.paths[name] = partial, writing, path
         self._bag.write_transforms([
             TransformRecord(self._start, "base_link", lidar_frame(i), lidar.mount, static=True)
             for i, lidar in enumerate(scenario.robot.lidars)])
@@ -76,7 +79,8 @@ class SessionBagRecorder:
             self._bag = None
             final = self.paths[result.name]
             _remove(final)                  # an earlier run's bag of this session
-            self._partial.rename(final)
+            self._writing.rename(final)
+            _remove(self._partial)          # the emptied partial folder (ROS 2)
 
 
 def _remove(path: Path) -> None:

@@ -75,3 +75,23 @@ def test_bag_clock_starts_at_a_realistic_epoch_not_at_zero(bag_run):
     start = BAG_EPOCH + DAY          # W2 is session 1: a day after the epoch
     assert BAG_EPOCH == 1.7e9 and start <= min(times) < start + 1.0
     assert max(times) - min(times) > 10.0
+
+
+def test_ros2_bag_names_its_data_file_after_the_bag_not_the_partial_folder(bag_run):
+    import yaml
+
+    from robotlogs.rosbag import read_bag
+
+    _, _, ros2 = bag_run
+    bag = ros2.paths["W2"]
+    names = sorted(p.name for p in bag.iterdir())
+    assert not [n for n in names if n.startswith(".")], names
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["relative_file_paths"] == ["W2.db3"] and "W2.db3" in names
+    # no partial bag left beside the finished ones
+    assert not [p.name for p in ros2.out_dir.iterdir() if p.name.startswith(".")]
+    # the latched /tf_static is recorded as transient local, as ROS 2's broadcaster offers it
+    tf_static = next(t for t in info["topics_with_message_count"]
+                     if t["topic_metadata"]["name"] == "/tf_static")
+    assert "durability: 1" in str(tf_static["topic_metadata"]["offered_qos_profiles"])
+    assert len([r for r in read_bag(bag, kinds=("scan",))]) > 10

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import OccupancyGrid, Pose2D
+from gridmap.map_io import MAX_CELLS     # the loader's limit: a map written can be read again
 from robotlogs import LogError, log_observations
 
 MAP_SOURCES = ("recorded", "truth")
 MARGIN = 1.0                 # [m] of unknown around the box of hits
-MAX_CELLS = 200_000_000      # a map larger than this is refused (it would take gigabytes)
 
 
 def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: str = "recorded",

@@ -92,3 +92,15 @@ def test_a_map_too_large_for_memory_is_refused(tmp_path):
         map_from_log(tmp_path / "far.log", tmp_path / "far.yaml", progress=False)
     assert np.all([not p.name.startswith("far.") or p.suffix == ".log"
                    for p in tmp_path.iterdir()])
+
+
+def test_a_map_the_loader_would_refuse_is_not_written(tmp_path, capsys):
+    # 500 m x 480 m at 5 cm: 96 M cells, over the 64 M a map file may have, under 200 M
+    lines = ["FLASER 2 1.0 1.0 0 0 0 0 0 0 1.0 h 0",
+             "FLASER 2 1.0 1.0 497 477 0 497 477 0 2.0 h 0"]
+    (tmp_path / "wide.log").write_text("\n".join(lines) + "\n")
+    assert main(["map", "--log", str(tmp_path / "wide.log"), "--out",
+                 str(tmp_path / "wide.yaml"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "more than 64000000 cells; give a coarser --resolution" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["wide.log"]

@@ -126,7 +126,7 @@ def partly_mapped(job):
     (written as a log of its own, so that logs with broken times split by scan order)."""
     import gzip
 
-    from evaluation.scores import ObservationCounter, growth_scores
+    from evaluation.scores import growth_scores, observed_counts
     from gridmap import load_map, save_map
     from gridmap.mapping import build_map
     from robotlogs.carmen import read_carmen
@@ -147,14 +147,9 @@ def partly_mapped(job):
     cfg = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
     s = update_from_log(work / f"{name}-part.yaml", work / f"{name}-rest.log",
                         work / f"{name}-grown.yaml", updater_config=cfg, progress=False)
-    counter = ObservationCounter(before, max_range=cfg.max_range)
-    for r in scans[cut:]:
-        rng = r.scan.ranges.astype(np.float64)
-        with np.errstate(invalid="ignore"):
-            ok = np.isfinite(rng) & (rng >= r.scan.range_min) & \
-                (rng < min(r.scan.range_max, cfg.max_range))
-        counter.add_scan(r.laser_pose, np.where(ok, rng, 0.0), r.scan.angles())
-    g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole, counter.counts)
+    counts = observed_counts(before, [(r.scan, r.laser_pose) for r in scans[cut:]],
+                             cfg.max_range)
+    g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole, counts)
     return {"log": name, "scans": len(scans) - cut, "processed": s["scans_processed"], **g}
 
 

@@ -3,9 +3,9 @@ and target cells, change detection with one cell of slack, ghosts, the oracle ma
 statistics. Functions over whole grids and pose arrays; imports only ``gridmap``."""
 
 from .scores import (MIN_OBSERVATIONS, OBSERVATION_RANGE, ObservationCounter, ape_statistics,
-                     change_detection, ghost_cells, growth_scores, near, oracle_map,
-                     paint_people, wrong_cells)
+                     change_detection, ghost_cells, growth_scores, near, observed_counts,
+                     oracle_map, paint_people, wrong_cells)
 
 __all__ = ["MIN_OBSERVATIONS", "OBSERVATION_RANGE", "ObservationCounter", "ape_statistics",
-           "change_detection", "ghost_cells", "growth_scores", "near", "oracle_map", "paint_people",
-           "wrong_cells"]
+           "change_detection", "ghost_cells", "growth_scores", "near", "observed_counts",
+           "oracle_map", "paint_people", "wrong_cells"]

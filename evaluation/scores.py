@@ -64,6 +64,19 @@ class ObservationCounter:
         return self.counts >= min_scans
 
 
+def observed_counts(frame: OccupancyGrid, placed, max_range: float) -> np.ndarray:
+    """Per cell of ``frame``, how many of the scans ``placed`` ((scan, sensor pose) pairs) hit
+    it or see through it with a valid beam (finite, at or past the scan's range_min, short of
+    its range_max and of ``max_range``)."""
+    counter = ObservationCounter(frame, max_range=max_range)
+    for scan, sensor in placed:
+        r = scan.ranges.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r >= scan.range_min) & (r < min(scan.range_max, max_range))
+        counter.add_scan(sensor, np.where(valid, r, 0.0), scan.angles())
+    return counter.counts
+
+
 def paint_people(mask: np.ndarray, frame: OccupancyGrid, people: np.ndarray) -> None:
     """Mark in ``mask`` the cells covered by people given as rows (x, y, radius) [m]."""
     if len(people) == 0:

@@ -151,8 +151,8 @@ class GatedMethod(MapOutput):
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
         if self.config.gating:
-            fov = math.degrees(abs(scan.angle_increment)) * len(scan.ranges)
-            reason = self._gate.check(t, gate_pose, odometry is not None, fov)
+            reason = self._gate.check(t, gate_pose, odometry is not None,
+                                      math.degrees(scan.fov()))
             if reason:
                 self.stats["gated"] += 1
                 return ScanReport(t, ScanStatus.GATED, reason)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evaluation.scores import ObservationCounter, growth_scores
+from evaluation.scores import growth_scores, observed_counts
 from gridmap import UNKNOWN, load_map, save_map
 from gridmap.mapping import build_map
 from robotlogs.carmen import read_carmen
@@ -42,13 +42,7 @@ PAPER = UpdaterConfig()       # the updater's own defaults: no growth into the u
 def observed(frame, placed) -> np.ndarray:
     """Per cell, how many of the scans (scan, sensor pose) hit it or see through it with a
     valid beam within the updater's range."""
-    counter = ObservationCounter(frame, max_range=MAX_RANGE)
-    for scan, sensor in placed:
-        r = scan.ranges.astype(np.float64)
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(r) & (r >= scan.range_min) & (r < min(scan.range_max, MAX_RANGE))
-        counter.add_scan(sensor, np.where(valid, r, 0.0), scan.angles())
-    return counter.counts
+    return observed_counts(frame, placed, MAX_RANGE)
 
 
 def grown(before, after, whole, counts) -> dict:

@@ -610,7 +610,8 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
     ``few`` times, and every flag it got says changed (an occupied cell of M only if no occupied
     8-neighbour is ``confirmed``: a wall grazed by a few beams keeps its cells); or, with
     ``support``, when n_c plus its 8-neighbours of the same two-state (free /
-    occupied-or-unknown) in ``ref`` with n >= T reaches T. Returns +1, -1 or 0, the change of the number of changed cells."""
+    occupied-or-unknown) in ``ref`` with n >= T reaches T. Returns +1, -1 or 0, the change of
+    the number of changed cells."""
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
     if not changed and few > 0:

@@ -162,8 +162,8 @@ class MapUpdater:
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
         if cfg.gating:
-            fov = math.degrees(abs(scan.angle_increment)) * len(scan.ranges)
-            reason = self._gate.check(t, gate_pose, odometry is not None, fov)
+            reason = self._gate.check(t, gate_pose, odometry is not None,
+                                      math.degrees(scan.fov()))
             if reason:
                 self._counts["gated"] += 1
                 n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0

@@ -101,7 +101,7 @@ def time_scans(ref: OccupancyGrid, scans, passes: int = 3) -> dict:
             "lost": lost, "changed_cells": updater.n_changed, "state_bytes": updater.state_bytes()}
 
 
-# The kernels a scan goes through, by the step of ALGORITHM.md they belong to.
+# The kernels a scan goes through, by the step of docs/algorithm.md they belong to.
 PARTS = (("virtual beams cast (cast_virtual)", ("cast_virtual",)),
          ("rest of the classifier", ("valid_ranges", "beam_directions", "beam_endpoints",
                                      "classify", "run_filter", "beam_verdicts")),
@@ -124,9 +124,9 @@ def time_parts(ref: OccupancyGrid, scans) -> dict:
     originals = {name: getattr(kernels, name) for name in spent}
 
     def timed(name, fn):
-        def call(*args):
+        def call(*args, **kwargs):
             t0 = time.perf_counter()
-            out = fn(*args)
+            out = fn(*args, **kwargs)
             spent[name] += time.perf_counter() - t0
             return out
         return call

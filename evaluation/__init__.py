@@ -1,4 +1,4 @@
-"""Scoring updated maps against the truth, as ../shared/EVALUATION.md defines it: observable
+"""Scoring updated maps against the truth, as docs/evaluation.md defines it: observable
 and target cells, change detection with one cell of slack, ghosts, the oracle map and APE
 statistics. Functions over whole grids and pose arrays; imports only ``gridmap``."""
 

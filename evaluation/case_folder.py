@@ -18,13 +18,14 @@ import yaml
 from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D, Scan,
                      load_map, save_map)
 from gridmap.atomic import write_atomically
+from gridmap.map_io import read_map_yaml
 
-from .edited_world import (CARMEN_RANGE_MIN, CASE_FILES, FEW_VIEWS, FLASER_NO_RETURN,
-                           TRUTH_MASKS, ZIP_TIME, Case, CaseError)
+from .edited_world import (CARMEN_RANGE_MIN, CASE_FILES, FEW_VIEWS, FLASER_NO_RETURN, TRUTH_MASKS,
+                           ZIP_TIME, Case, CaseError)
+from .scores import near
 
 __all__ = ["CASE_FILES", "case_lines", "case_record", "check_case_dir", "load_case", "log_text",
            "score_case", "score_lines", "write_case", "write_scores"]
-from .scores import near
 
 
 # --- the case folder ---------------------------------------------------------------------------
@@ -40,8 +41,6 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _map_files(map_path) -> list[Path]:
     """The map's YAML and, when its YAML can be read, its image."""
-    from gridmap.map_io import read_map_yaml
-
     try:
         return [Path(map_path), Path(read_map_yaml(map_path).image)]
     except (MapUpdatingError, OSError):

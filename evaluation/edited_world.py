@@ -28,8 +28,10 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from tqdm import tqdm
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D
+from gridmap.distance import distance_to_occupied
 
 from .edited_geometry import Box, box_entry, box_params, cut_in, disc_entry, edit_scans, ray_entry
 from .scores import ObservationCounter
@@ -310,8 +312,6 @@ class _Walker:
     near where the laser passes (where a person can be seen)."""
 
     def __init__(self, grid: OccupancyGrid, taken: np.ndarray, lasers: np.ndarray, rng):
-        from gridmap.distance import distance_to_occupied
-
         self.grid, self.rng = grid, rng
         self.walkable = np.zeros(grid.shape, bool)
         self.starts = np.zeros(0, np.int64)
@@ -453,8 +453,6 @@ def _check_counts(seed, removed, added, moved, people, min_views) -> None:
 
 
 def _bar(progress: bool, **kw):
-    from tqdm import tqdm
-
     return tqdm(disable=not progress, delay=1.0, leave=False, dynamic_ncols=True, **kw)
 
 

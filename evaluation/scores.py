@@ -1,4 +1,4 @@
-"""Scores of a session, as ../shared/EVALUATION.md defines them: observable and target cells,
+"""Scores of a session, as docs/evaluation.md defines them: observable and target cells,
 change detection with one cell of slack, ghosts, the oracle map and APE statistics.
 
 Every function takes whole grids (int8, ROS convention) or pose arrays and returns numbers;
@@ -56,8 +56,9 @@ class ObservationCounter:
         gx0, gy0 = (sensor_pose.x - ox) / res, (sensor_pose.y - oy) / res
         end_gx = gx0 + r * np.cos(a) / res
         end_gy = gy0 + r * np.sin(a) / res
-        _kernels.count_observations(self.counts, self._stamp, self._scans, gx0, gy0,
-                                    end_gx, end_gy, self._rows, self._cols)
+        _kernels.count_observations(self.counts, self._stamp, scan_id=self._scans, gx0=gx0,
+                                    gy0=gy0, end_gx=end_gx, end_gy=end_gy, rows=self._rows,
+                                    cols=self._cols)
         self._scans += 1
 
     def observable(self, min_scans: int = MIN_OBSERVATIONS) -> np.ndarray:

@@ -9,7 +9,7 @@ float64 for any grid that fits in memory. Kernels take arrays and scalars only.
 import numpy as np
 from numba import njit
 
-OCC = 100
+from .cells import OCCUPIED
 
 
 @njit(cache=True)
@@ -62,7 +62,7 @@ def squared_edt(cells):
     z = np.empty(n + 1, np.float64)
     for c in range(w):                       # pass 1: down each column
         for r in range(h):
-            f[r] = 0.0 if cells[r, c] == OCC else np.inf
+            f[r] = 0.0 if cells[r, c] == OCCUPIED else np.inf
         edt_1d(f[:h], out[:h], v, z)
         for r in range(h):
             d2[r, c] = out[r]

@@ -3,9 +3,11 @@ package does it: unknown keys are refused with the nearest valid name."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, fields
 from pathlib import Path
 
+from .files import FileInputError, load_yaml
 from .suggest import did_you_mean
 
 
@@ -45,8 +47,6 @@ def check_bounds(config, bounds: dict, error: type[Exception]) -> None:
     key, the range and the value. A bound on every number keeps a misspelt order of magnitude
     (a window of 1e9 degrees, a 1e300 m^2 area) from running for hours or failing deep inside a
     kernel."""
-    import math
-
     for f in fields(config):
         if f.name not in bounds:
             continue
@@ -68,8 +68,6 @@ def config_to_dict(config) -> dict:
 def config_from_yaml(cls, path, error: type[Exception], section: str, *also: str):
     """Load a configuration from YAML holding the keys at the top level or under ``section``
     (or under one of the other names ``also``)."""
-    from .files import FileInputError, load_yaml
-
     path = Path(path)
     try:
         values = load_yaml(path, f"{section} configuration", error) or {}

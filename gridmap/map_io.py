@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,12 +30,13 @@ import numpy as np
 import yaml
 
 from .atomic import write_atomically
+from .cells import FREE, OCCUPIED, UNKNOWN
 from .files import FileInputError, check_regular_file, load_yaml
-from .types import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid
+from .types import GridError, OccupancyGrid
 
 MODES = ("trinary", "scale", "raw")
 # What a map can be: 1 mm to 10 m cells, an origin within 1000 km, at most 64 M cells (8000 x
-# 8000, 400 m at 5 cm; the updater holds about 3.3 bytes per cell). Beyond these a map is a
+# 8000, 400 m at 5 cm; the updater holds a few bytes per cell). Beyond these a map is a
 # mistake, and reading it would only fill memory.
 MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0
 MAX_ORIGIN = 1e6
@@ -255,7 +257,6 @@ def _read_image(path: Path, yaml_path: Path) -> tuple[np.ndarray, int, np.ndarra
         raise MapFileError(f"{path}: cannot read image ({e})") from None
     if path.suffix.lower() in (".pgm", ".pnm") or magic in (b"P2", b"P5"):
         return (*read_pgm(path), None)
-    import warnings
 
     from PIL import Image, UnidentifiedImageError  # only maps that are not PGM need Pillow
 
@@ -304,7 +305,7 @@ def _pixels_to_values(pixels: np.ndarray, maxval: int, meta: MapMetadata) -> np.
         lightness = 1.0 - lightness
     if meta.mode == "raw":
         v = np.rint(lightness * 255.0)
-        return np.where(v <= 100, v, UNKNOWN).astype(np.int8)
+        return np.where(v <= OCCUPIED, v, UNKNOWN).astype(np.int8)
     occ = 1.0 - lightness
     values = np.full(pixels.shape, UNKNOWN, np.int8)
     if meta.mode == "scale" and meta.occupied_thresh > meta.free_thresh:

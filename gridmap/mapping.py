@@ -25,8 +25,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .cells import FREE, OCCUPIED, UNKNOWN
 from .config import config_from_dict
-from .types import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid, Pose2D, Scan
+from .types import GridError, OccupancyGrid, Pose2D, Scan
 
 
 @dataclass(frozen=True)
@@ -110,8 +111,9 @@ class LogOddsMapper:
         rows = np.empty(cap, np.int64)
         cols = np.empty(cap, np.int64)
         self._scans += 1
-        k.integrate_scan(self.logodds, self._stamp, self._scans, sensor, angles, ranges, limits,
-                         self._increments, rows, cols)
+        k.integrate_scan(self.logodds, self._stamp, scan_id=self._scans, sensor=sensor,
+                         angles=angles, ranges=ranges, limits=limits,
+                         increments=self._increments, rows=rows, cols=cols)
 
     def probabilities(self) -> np.ndarray:
         """Occupancy probability of every cell (float64)."""

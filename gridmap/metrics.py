@@ -1,4 +1,4 @@
-"""Map quality metrics of EVALUATION.md, all in percent (100 = identical maps).
+"""Map quality metrics of docs/evaluation.md, all in percent (100 = identical maps).
 
 Cells are read as probabilities: free 0 -> 0.0, occupied 100 -> 1.0, unknown -1 -> 0.5 (graded
 values 1..99 -> v / 100). Every function takes two :class:`OccupancyGrid` s in the same frame, or
@@ -17,7 +17,8 @@ import math
 
 import numpy as np
 
-from .types import OCCUPIED, GridError, OccupancyGrid
+from .cells import OCCUPIED, UNKNOWN
+from .types import GridError, OccupancyGrid
 
 
 def cross_correlation(a, b) -> float:
@@ -133,7 +134,7 @@ def _as_cells(x, which: str) -> np.ndarray:
     if d.dtype != np.int8:
         if not np.issubdtype(d.dtype, np.integer):
             raise GridError(f"the {which} map must hold integer cells, got dtype {d.dtype}")
-        if d.min() < -1 or d.max() > 100:
+        if d.min() < UNKNOWN or d.max() > OCCUPIED:
             raise GridError(f"the {which} map has cells outside -1..100")
         d = d.astype(np.int8)
     return d

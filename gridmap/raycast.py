@@ -32,7 +32,7 @@ def traverse(grid: OccupancyGrid, start, end) -> tuple[np.ndarray, np.ndarray]:
     cap = int(abs(math.floor(gx1) - math.floor(gx0)) + abs(math.floor(gy1) - math.floor(gy0))) + 2
     rows = np.empty(cap, np.int64)
     cols = np.empty(cap, np.int64)
-    n = k.traverse(gx0, gy0, gx1, gy1, grid.height, grid.width, rows, cols)
+    n = k.traverse(gx0, gy0, gx1, gy1, height=grid.height, width=grid.width, rows=rows, cols=cols)
     return rows[:n], cols[:n]
 
 
@@ -55,5 +55,6 @@ def cast_rays(grid: OccupancyGrid, origin: Pose2D, angles, max_range: float,
     sensor = np.array([(origin.x - grid.origin[0]) / res, (origin.y - grid.origin[1]) / res,
                        origin.theta])
     ranges = np.empty(angles.size, np.float64)
-    k.cast_ranges(grid.data, sensor, angles, max_range / res, bool(block_unknown), res, ranges)
+    k.cast_ranges(grid.data, sensor, angles, max_len=max_range / res,
+                  block_unknown=bool(block_unknown), res=res, out=ranges)
     return ranges

@@ -13,11 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .cells import FREE, OCCUPIED, UNKNOWN
 from .errors import MapUpdatingError
-
-FREE = 0
-OCCUPIED = 100
-UNKNOWN = -1
 
 
 class GridError(MapUpdatingError, ValueError):
@@ -170,10 +167,6 @@ class OccupancyGrid:
     def contains(self, row, col):
         row, col = np.asarray(row), np.asarray(col)
         return (row >= 0) & (row < self.height) & (col >= 0) & (col < self.width)
-
-    def contains_point(self, x: float, y: float) -> bool:
-        r, c = self.world_to_cell(x, y)
-        return bool(self.contains(r, c))
 
     # --- helpers -----------------------------------------------------------------------------
     def copy(self) -> OccupancyGrid:

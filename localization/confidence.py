@@ -50,7 +50,7 @@ UNSURE_FIT = "pose unsure: a nearby pose fits the scan better"
 UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
 
 
-# The range of every number (README, "Reliability"), and of the work one check may do.
+# The range of every number (docs/reliability.md), and of the work one check may do.
 POSE_CHECK_BOUNDS = {
     "max_gain": (0.0, 1.0), "min_correction": (0.0, 10.0), "min_correction_deg": (0.0, 180.0),
     "cap": (1e-3, 5.0), "slack_cells": (0, 10), "max_beams": (2, 10_000),
@@ -66,10 +66,10 @@ MAX_POSES = 250_000
 
 @dataclass(frozen=True)
 class PoseCheckConfig:
-    """Thresholds of the pose check. Measured on the warehouse's W2 route at the true poses
-    plus an offset (benchmarks/bench_mislocalisation.py), the defaults refuse 1 % of the scans
-    without an offset, 6 % at 0.5 deg, 30 % at 5 cm, and 98-100 % from 7.5 cm or 1 deg on (the
-    fit's verdicts; the hold of ``retry_interval`` adds the scans that follow a refusal)."""
+    """Thresholds of the pose check. On the warehouse's W2 route at the true poses plus an
+    offset (benchmarks/bench_mislocalisation.py), the defaults refuse few scans without an
+    offset or at 0.5 deg, many at 5 cm, and nearly all from 7.5 cm or 1 deg on (the fit's
+    verdicts; the hold of ``retry_interval`` adds the scans that follow a refusal)."""
 
     max_gain: float = 0.01              # [1] a better pose this much better: the pose is off ...
     min_correction: float = 0.06        # [m] ... when it lies at least this far away
@@ -165,11 +165,12 @@ class PoseCheck:
         c = self.config
         # Slack: a beam that ends on a surface lands in the occupied cell or in the free one
         # before it, as noise has it. Scored by centre distance, that half-cell ambiguity alone
-        # makes a pose 2-3 cm into the surface "fit better" by about 0.015 on a scan of long
-        # walls, which refuses right poses where a narrow field of view leaves one direction
-        # unconstrained (a 180 deg lidar along a corridor). One cell of slack makes the fit flat
-        # within a cell of a surface, at the price of missing errors of about 0.1 m and 1 deg
-        # (bench_mislocalisation: 59 and 30 G-occupied cells freed, against 0 without).
+        # makes a pose 2-3 cm into the surface "fit better" by more than the default
+        # ``max_gain`` on a scan of long walls, which refuses right poses where a narrow field
+        # of view leaves one direction unconstrained (a 180 deg lidar along a corridor). One
+        # cell of slack makes the fit flat within a cell of a surface, at the price of missing
+        # errors of about 0.1 m and 1 deg (bench_mislocalisation: with slack such errors free
+        # G-occupied cells, without it none; figures in benchmarks/RESULTS.md).
         slack = np.float32(grid.resolution * c.slack_cells)
         dist = np.maximum(distance_to_occupied(grid, c.cap + slack) - slack, 0.0)
         residual = dist / np.float32(c.cap)
@@ -206,7 +207,8 @@ class PoseCheck:
 
         score = np.empty(self._offsets.shape[0])
         _kernels.likelihood_field(robot_pose.as_array() + self._offsets, sensor_mount.as_array(),
-                                  beams.points, self._table, self._frame, -1.0, 0.0, score)
+                                  beams.points, table=self._table, frame=self._frame,
+                                  off_value=-1.0, base=0.0, out=score)
         score /= -beams.count
         best = int(np.argmin(score))
         dx, dy, dth = self._offsets[best]
@@ -229,7 +231,7 @@ class PoseCheck:
         ``polish_step_deg`` around it. A localiser's estimate between its updates carries
         the odometry's drift since the last one, a few centimetres; faces the updater draws
         from such poses land a cell or two off and are then, being within the pairing
-        distance of the truth, never corrected (README, "Choices")."""
+        distance of the truth, never corrected (docs/choices.md)."""
         c = self.config
         beams = select_beams(scan, c.max_beams)     # selected once for the check and the polish
         reason, f = self._check(scan, robot_pose, sensor_mount, cov, beams)

@@ -18,7 +18,7 @@ class LocalizationError(MapUpdatingError, ValueError):
 
 
 RESAMPLERS = ("systematic", "stratified", "residual", "multinomial")
-# The range of every number (README, "Reliability"): wide enough for any robot, narrow enough
+# The range of every number (docs/reliability.md): wide enough for any robot, narrow enough
 # that a slip of a digit is refused rather than run for hours.
 BOUNDS = {
     "alpha1": (0.0, 10.0), "alpha2": (0.0, 10.0), "alpha3": (0.0, 10.0), "alpha4": (0.0, 10.0),

@@ -54,7 +54,6 @@ class MonteCarloLocalizer:
         self._last_odom: Pose2D | None = None
         self._updates = 0                        # sensor updates, for resample_interval
         self._estimate: Estimate | None = None
-        self.last_tempering = 1.0                # exponent applied to the latest likelihood
         self.set_map(grid)
 
     # --- the map ---------------------------------------------------------------------------
@@ -188,7 +187,6 @@ class MonteCarloLocalizer:
         beta = temper(log_prior, log_p, c.min_ess_fraction)
         log_w = log_prior + beta * log_p
         self._weights = normalise(np.exp(log_w - np.max(log_w)))
-        self.last_tempering = beta
 
     def _resample(self) -> None:
         inject = self._recovery.injection_probability()

@@ -115,6 +115,6 @@ def likelihood_field(lf: LikelihoodField, poses: np.ndarray, sensor_mount: Pose2
     likelihood_field_prob."""
     table, off_value, base = lf.table(beams.range_max)
     out = np.empty(poses.shape[0], np.float64)
-    _kernels().likelihood_field(poses, sensor_mount.as_array(), beams.points, table, lf.frame,
-                                off_value, base, out)
+    _kernels().likelihood_field(poses, sensor_mount.as_array(), beams.points, table=table,
+                                frame=lf.frame, off_value=off_value, base=base, out=out)
     return np.log(out) if lf.model == "likelihood_field" else out

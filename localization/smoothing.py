@@ -24,8 +24,8 @@ pose against an earlier one carried by the odometry (the innovation):
   ``map -> odom`` only at its filter updates (every 0.2 m by default), so between them its
   poses follow the odometry exactly, and each update is a correction of the drift since the
   last; averaging those would only hold the corrections back (the simulated warehouse's bags,
-  whose localiser works so: precision 0.976 -> 0.932 and recall 0.902 -> 0.884 in W2 when
-  smoothed).
+  whose localiser works so, lose precision and recall in W2 when smoothed; figures in
+  benchmarks/RESULTS.md).
 - Its innovations do not grow with the lag (``MAX_GROWTH``). Jitter is fresh at every scan,
   so a pose half a window back differs from the latest by no more than the previous one does;
   odometry noise adds up, so with a precise localisation and noisy odometry the innovation

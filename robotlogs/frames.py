@@ -97,9 +97,6 @@ class TransformTree:
             self.dynamic.setdefault(rec.child, PoseTimeline(hold_after, steps)).add(rec.time,
                                                                                    rec.pose)
 
-    def has_edge(self, parent: str, child: str) -> bool:
-        return self.parent.get(child) == parent
-
     def frames(self) -> set[str]:
         return set(self.parent) | set(self.parent.values())
 

@@ -8,7 +8,9 @@ Imports only ``gridmap`` and this package.
 
 from __future__ import annotations
 
+import gzip
 import math
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,9 +75,6 @@ def detect_format(path) -> str:
 
 def _gunzipped_head(path: Path) -> bytes:
     """The first 4 KB of a gzip file's content (a compressed CARMEN log, as killian.clf.gz)."""
-    import gzip
-    import zlib
-
     try:
         with gzip.open(path, "rb") as f:
             return f.read(4096)

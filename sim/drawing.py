@@ -17,6 +17,7 @@ import numpy as np
 from gridmap.atomic import write_with
 
 from . import geometry as geo
+from .world import World
 
 COLORS = {"wall": "#555555", "static": "#7f7f7f", "movable": "#c8a165", "pallet": "#d9b44a",
           "added": "#4caf50", "removed": "#d62728", "person": "#e4572e", "robot": "#1f77b4"}
@@ -77,8 +78,6 @@ def render_world(scenario, session, path_png, *, seed=None, time: float = 0.0,
 
 def _world_at(scenario, session, seed, time: float):
     """The session's world, run up to ``time`` [s]."""
-    from .world import World
-
     world = World(scenario, session, seed)
     if time > 0:
         for msg in world.run():

@@ -34,10 +34,10 @@ def cast_ranges(sensors: np.ndarray, spec, segments: np.ndarray, circles: np.nda
     (K, 3) hit; inf where nothing is within range_max."""
     sensors = np.ascontiguousarray(sensors, np.float64).reshape(-1, 3)
     out = np.empty((sensors.shape[0], spec.beams), np.float64)
-    _kernels().cast_scans(sensors, spec.angle_min, spec.angle_increment,
-                          np.ascontiguousarray(segments, np.float64).reshape(-1, 4),
-                          np.ascontiguousarray(circles, np.float64).reshape(-1, 3),
-                          spec.range_max, out)
+    _kernels().cast_scans(sensors, angle_min=spec.angle_min, inc=spec.angle_increment,
+                          segs=np.ascontiguousarray(segments, np.float64).reshape(-1, 4),
+                          circles=np.ascontiguousarray(circles, np.float64).reshape(-1, 3),
+                          max_range=spec.range_max, out=out)
     return out
 
 

@@ -179,8 +179,9 @@ class People:
         out = np.empty_like(self.pos)
         if len(self):
             _kernels().people_step(self.pos, self.vel, self.radius, self.speed, self.goals,
-                                   self.boxes, self.segments, self.circles, robot_disc,
-                                   SOCIAL_PARAMS, dt, SPEED_CAP, self.progress, out)
+                                   boxes=self.boxes, segs=self.segments, circles=self.circles,
+                                   robot=robot_disc, params=SOCIAL_PARAMS, dt=dt,
+                                   speed_cap=SPEED_CAP, progress=self.progress, out=out)
             self.update_goals()
         return out
 

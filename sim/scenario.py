@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import MapUpdatingError, Pose2D
+from gridmap.files import FileInputError, load_yaml
 from gridmap.suggest import did_you_mean
 
-from .validate import MAX_SESSION_S
+from .validate import MAX_SESSION_S, check_scenario
 
 
 class ScenarioError(MapUpdatingError, ValueError):
@@ -444,8 +445,6 @@ def _world(r: _Reader, node, key: str) -> WorldSpec:
 
 def scenario_from_dict(data, source: str = "") -> Scenario:
     """Build and validate a scenario from the parsed YAML tree; ``source`` names it in errors."""
-    from .validate import check_scenario
-
     r = _Reader(source)
     data = r.mapping(data, "", {"name", "world", "robot", "sessions"},
                      {"seed", "resolution", "physics_hz"})
@@ -487,8 +486,6 @@ def _resolve_moves(scn: Scenario) -> Scenario:
 
 def load_scenario(path) -> Scenario:
     """Read and validate a scenario file (YAML, the format of the design document)."""
-    from gridmap.files import FileInputError, load_yaml
-
     path = Path(path)
     try:
         data = load_yaml(path, "scenario file", ScenarioError)

@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from gridmap.map_io import MAX_CELLS
 from gridmap.suggest import did_you_mean
 
 from . import geometry as geo
@@ -72,8 +73,6 @@ def check_scenario(scn, fail: Fail) -> None:
 
 def _check_size(scn, fail: Fail) -> None:
     """The session grids (maps, truth, buffers) must fit: at most ``MAX_CELLS`` cells."""
-    from gridmap.map_io import MAX_CELLS
-
     x0, y0, x1, y1 = scn.world.bounds
     pad = 2 * (scn.world.wall_thickness + 0.1)
     cells = math.ceil((x1 - x0 + pad) / scn.resolution) * \

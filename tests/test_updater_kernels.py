@@ -1,6 +1,6 @@
 """Every kernel of updater._kernels against a plain NumPy / Python reference, on seeded random
 input, and the steps of updater.steps where they add something of their own: the per-beam
-distances against ALGORITHM.md's numbers written out here, and the rules that are not in
+distances against docs/algorithm.md's numbers written out here, and the rules that are not in
 the paper (the seen-surface guard, fill_gaps, the hits that confirm M's surfaces) in a
 synthetic room. The references are written
 for clarity, not speed, and share no code with the kernels or the configuration."""
@@ -13,7 +13,9 @@ from collections import deque
 import numpy as np
 import pytest
 
-from gridmap import Pose2D, Scan
+from gridmap import FREE, Pose2D, Scan
+from gridmap import OCCUPIED as OCC
+from gridmap import UNKNOWN as UNK
 from updater import UpdaterConfig, steps
 from updater import _kernels as K
 
@@ -21,8 +23,6 @@ try:
     import synthetic_room as world
 except ImportError:  # tests collected as a package
     from tests import synthetic_room as world
-
-FREE, OCC, UNK = 0, 100, -1
 
 
 # --- references -------------------------------------------------------------------------------
@@ -121,7 +121,7 @@ def test_clear_bits_clears_the_listed_cells_only():
     assert (np.unpackbits(bits, bitorder="little").astype(bool) == expect).all()
 
 
-# --- ALGORITHM.md's range-dependent distances, written out here ------------------------------
+# --- docs/algorithm.md's range-dependent distances, written out here -------------------------
 def pairing_distance(r):
     """D(r) [m]: 0.15 m at 0.2 m, slope 0.013265, at most 0.30 m."""
     return min(0.15 + 0.013265 * (r - 0.2), 0.30)
@@ -481,7 +481,7 @@ def change_beam(sensor, r, hit, cfg):
     pairing, tol, skip = steps.beam_distances(ranges, 0.05, cfg)
     return steps.Beams(np.asarray(sensor, float), ranges, np.array([hit], float), pairing,
                        tol, skip, np.full(1, cfg.free_fraction), np.array([K.CHANGE], np.int8),
-                       1, 1, 1, 1000)
+                       1, 1, 1)
 
 
 def flagged_changed(data, beams):

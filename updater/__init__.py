@@ -1,4 +1,4 @@
-"""The map updater of ALGORITHM.md: keeps an occupancy grid true while the world changes.
+"""The map updater of docs/algorithm.md: keeps an occupancy grid true while the world changes.
 
 Imports nothing of this project but ``gridmap``; numba is imported on first use.
 
@@ -9,8 +9,10 @@ Imports nothing of this project but ``gridmap``; numba is imported on first use.
 """
 
 from .config import UpdaterConfig, UpdaterError
-from .map_updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, MapUpdater,
-                          ScanReport, ScanStatus)
+from .map_updater import MapUpdater, ScanReport, ScanStatus
+from .method import MapMethod, PoseCheckCall
+from .verdicts import BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, BeamVerdict
 
-__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "ScanReport", "ScanStatus",
-           "BEAM_INVALID", "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]
+__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "MapMethod", "PoseCheckCall",
+           "ScanReport", "ScanStatus",
+           "BeamVerdict", "BEAM_INVALID", "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]

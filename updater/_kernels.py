@@ -12,15 +12,15 @@ import numpy as np
 from numba import njit
 
 from gridmap._kernels import NO_HIT, find_root, first_hit, traverse
+from gridmap.cells import FREE, OCCUPIED
 
-FREE = 0
-OCC = 100
-UNK = -1
-# Per-beam verdicts of the classifier.
-INVALID = 0
-UNCHANGED = 1
-SKIPPED = 2
-CHANGE = 3
+from .verdicts import BeamVerdict
+
+# The per-beam verdicts as plain ints, which numba compiles in as constants.
+INVALID = int(BeamVerdict.INVALID)
+UNCHANGED = int(BeamVerdict.UNCHANGED)
+SKIPPED = int(BeamVerdict.SKIPPED)
+CHANGE = int(BeamVerdict.CHANGE)
 
 
 # --- bits and counts --------------------------------------------------------------------------
@@ -332,8 +332,8 @@ def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, mar
                     continue
                 dx = max(col - x, 0.0, x - col - 1.0)
                 idx = row * width + col
-                if dx * dx + dy * dy > (r2 if v == OCC else u2) or \
-                        (v != OCC and bit_get(enclosed, idx)):
+                if dx * dx + dy * dy > (r2 if v == OCCUPIED else u2) or \
+                        (v != OCCUPIED and bit_get(enclosed, idx)):
                     continue
                 if test_and_set(marks, idx):
                     out[n] = idx
@@ -421,7 +421,7 @@ def flag_hit_surfaces(ref, hits, verdict, marks, out, n):
             continue
         for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
             row, col = row0 + dr, col0 + dc
-            if 0 <= row < height and 0 <= col < width and ref[row, col] == OCC:
+            if 0 <= row < height and 0 <= col < width and ref[row, col] == OCCUPIED:
                 if test_and_set(marks, row * width + col):
                     out[n] = row * width + col
                     n += 1
@@ -434,7 +434,7 @@ def is_open_unknown(ref_flat, enclosed, idx):
     """Unknown in M and outside the enclosed regions: space M never saw, where the map grows
     (an enclosed region is an object's interior, which the last check closes)."""
     v = ref_flat[idx]
-    return v != FREE and v != OCC and not bit_get(enclosed, idx)
+    return v != FREE and v != OCCUPIED and not bit_get(enclosed, idx)
 
 
 @njit(cache=True)
@@ -545,7 +545,7 @@ def apply_drawn(drawn, out):
             continue
         for idx in range(b * 8, min(b * 8 + 8, out.shape[0])):
             if bit_get(drawn, idx):
-                out[idx] = OCC
+                out[idx] = OCCUPIED
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -570,7 +570,7 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
             idx, flag = unchanged[k - n_changed], 0
             un_marks[idx >> 3] = 0
         old = hist[idx]
-        watched = few > 0 and ref[idx] == OCC
+        watched = few > 0 and ref[idx] == OCCUPIED
         if old == 0 and flag == 0 and not watched:
             if counting and seen[idx] < 255:
                 seen[idx] += 1
@@ -597,7 +597,7 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
 def confirmed(hist, seen, ref, idx, mask):
     """An occupied cell of M whose recent flags are not all changed: a surface the scans still
     see. The unanimous rule frees no occupied cell next to one."""
-    if ref[idx] != OCC or seen[idx] == 0:
+    if ref[idx] != OCCUPIED or seen[idx] == 0:
         return False
     window = popcount16(mask)
     return popcount16(hist[idx] & mask) < min(int(seen[idx]), window)
@@ -616,7 +616,7 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
     changed = n >= threshold
     if not changed and few > 0:
         changed = n >= few and seen[idx] < threshold and n == seen[idx]
-        if changed and ref[idx] == OCC:     # not a cell of a surface the scans still see
+        if changed and ref[idx] == OCCUPIED:     # not a cell of a surface the scans still see
             height = ref.shape[0] // width
             row, col = idx // width, idx % width
             for rr in range(max(row - 1, 0), min(row + 2, height)):
@@ -687,16 +687,16 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out):
         for idx in range(b * 8, min(b * 8 + 8, ref.shape[0])):
             if not bit_get(decided, idx):
                 continue
-            out[idx] = OCC if ref[idx] == FREE else FREE
+            out[idx] = OCCUPIED if ref[idx] == FREE else FREE
             if not close or ref[idx] == FREE:
                 continue
             row, col = idx // width, idx % width
             for rr in range(max(row - 1, 0), min(row + 2, height)):
                 for cc in range(max(col - 1, 0), min(col + 2, width)):
                     j = rr * width + cc
-                    if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCC \
+                    if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCCUPIED \
                             and (hist.shape[0] == 0 or hist[j] == 0):
-                        out[j] = OCC
+                        out[j] = OCCUPIED
                         closed += 1
     return closed
 

@@ -1,4 +1,4 @@
-"""The updater's configuration: one frozen dataclass with the defaults of ALGORITHM.md.
+"""The updater's configuration: one frozen dataclass with the defaults of docs/algorithm.md.
 
 Every parameter of the method lives here, with its unit in brackets. Loading (``from_dict``,
 ``from_yaml``) refuses unknown keys with the nearest valid name and checks every value.
@@ -7,6 +7,8 @@ Every parameter of the method lives here, with its unit in brackets. Loading (``
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+
+import numpy as np
 
 from gridmap.config import check_bounds, config_from_dict, config_from_yaml
 from gridmap.errors import MapUpdatingError
@@ -21,7 +23,7 @@ class UpdaterError(MapUpdatingError, ValueError):
 MAX_BUFFER_SIZE = 16
 
 
-# The range of every number (README, "Reliability"): wide enough for any lidar and map, narrow
+# The range of every number (docs/reliability.md): wide enough for any lidar and map, narrow
 # enough that a slip of a digit (a window of 1e9 degrees, 1e6 virtual beams per beam, a 1e300
 # m^2 region) is refused rather than run for hours or failing inside a kernel.
 BOUNDS = {
@@ -86,12 +88,12 @@ class UpdaterConfig:
     # outside the enclosed regions) within this distance of the hit point of any valid beam of
     # the scan (a surface the scan sees) gets no removed-obstacle flag from that scan. Under a
     # pose error below a cell the rays that graze an object's corner cross its outline cells
-    # while the beams that hit the object say it is still there (README, "Choices").
+    # while the beams that hit the object say it is still there (docs/choices.md).
     seen_surface_radius: float = 0.075       # [m]; 0: off
     # Not in the paper (steps.fill_gaps): a hit that pairs with M but lands in a cell with
     # nothing of M within fill_gaps_clearance also gets a changed flag. The pairing distance
     # D(r) otherwise hides the gaps of a face that an earlier session mapped only in pieces
-    # (README, "fill_gaps").
+    # (docs/choices.md, "fill_gaps").
     fill_gaps: bool = False
     fill_gaps_clearance: float = 0.05        # [m] free square around the hit cell, each way
     fill_gaps_free_margin: float = 0.075     # [m] free flags of agreeing beams this short of
@@ -100,7 +102,7 @@ class UpdaterConfig:
     # (unknown, outside the enclosed regions): cells that beams looking into it see through
     # become free by their changed flags, cells hit become occupied by hit buffers of N_b flags
     # and the threshold T. Without it, a partly mapped place stays as unknown as M had it.
-    grow_into_unknown: bool = False          # on in mapupdate update and the ROS node, README
+    grow_into_unknown: bool = False          # on in mapupdate update and the ROS node
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -134,7 +136,7 @@ class UpdaterConfig:
             raise UpdaterError(f"config key 'threshold' ({self.threshold}) exceeds "
                                f"'buffer_size' ({self.buffer_size}): no cell could ever change")
 
-    # --- the range-dependent distances of ALGORITHM.md [m], for a range or an array of them ---
+    # --- the range-dependent distances of docs/algorithm.md [m], for a range or an array of them
     def pairing_distance(self, r):
         """D(r) [m]: a measured point this close to an expected point is explained by the map."""
         return _minimum(self.pairing_distance_near
@@ -166,12 +168,8 @@ class UpdaterConfig:
 
 
 def _minimum(a, b):
-    import numpy as np
-
     return np.minimum(a, b) if isinstance(a, np.ndarray) else min(a, b)
 
 
 def _maximum(a, b):
-    import numpy as np
-
     return np.maximum(a, b) if isinstance(a, np.ndarray) else max(a, b)

@@ -1,4 +1,4 @@
-"""Step 0 of ALGORITHM.md, gating: which scans the updater processes at all.
+"""Step 0 of docs/algorithm.md, gating: which scans the updater processes at all.
 
 A scan is processed only if at least ``gate_min_interval`` passed since the last processed scan
 AND the robot moved ``gate_min_distance`` or turned ``gate_min_rotation_deg`` since then. After

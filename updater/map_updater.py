@@ -43,16 +43,11 @@ import numpy as np
 
 from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
 from gridmap.atomic import write_atomically
+from gridmap.files import FileInputError, check_regular_file
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
 from .gating import CONFIRMING, SKIPPED_OFF_MAP, Gate
-
-# Per-beam verdicts (ScanReport.verdicts), the same codes as the kernels use.
-BEAM_INVALID = 0      # not a valid range: no flags
-BEAM_UNCHANGED = 1    # agrees with M: unchanged flags
-BEAM_SKIPPED = 2      # agrees with M but within n_skip beams of a change: no flags
-BEAM_CHANGE = 3       # detected change kept by the run filter: changed flags
 
 STATE_FORMAT = 1
 
@@ -81,7 +76,10 @@ class ScanReport:
     new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
     unchanged_flags: int = 0       # cells that got an unchanged flag
     changed_cells: int = 0         # cells whose state differs from M, after this scan
-    verdicts: np.ndarray | None = None   # BEAM_* per beam, None when not classified
+    verdicts: np.ndarray | None = None   # a BeamVerdict per beam (int8), None when not classified
+    # the sensor pose the scan was placed at: as given, or as the pose check refined it; None
+    # when the pose check refused it
+    sensor_pose: Pose2D | None = None
 
     @property
     def processed(self) -> bool:
@@ -96,11 +94,13 @@ class ScanReport:
         """The report without the per-beam verdicts, as plain values."""
         out = {k: v for k, v in vars(self).items() if k != "verdicts"}
         out["status"] = self.status.value
+        if self.sensor_pose is not None:
+            out["sensor_pose"] = list(self.sensor_pose.as_array())
         return out
 
 
 class MapUpdater:
-    """The map updater of ALGORITHM.md on a fixed reference map.
+    """The map updater of docs/algorithm.md on a fixed reference map.
 
     ``process(scan, sensor_pose, odometry)`` once per scan; ``updated_map()`` at any time.
     ``sensor_pose`` is the lidar's pose in the map frame (the robot pose already composed with
@@ -168,16 +168,19 @@ class MapUpdater:
                 self._counts["gated"] += 1
                 n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
                 return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
-                                  changed_cells=self._n_changed)
-        sensor, status, reason = self._sensor_for_scan(sensor_pose, pose_check)
+                                  changed_cells=self._n_changed, sensor_pose=sensor_pose)
+        placed, status, reason = self._placed_pose(sensor_pose, pose_check)
         if status is not None:
             self._counts["skipped"] += 1
-            return ScanReport(t, status, reason, changed_cells=self._n_changed)
+            return ScanReport(t, status, reason, changed_cells=self._n_changed,
+                              sensor_pose=placed)
 
+        sensor = steps.to_grid(placed, self._origin, self._res)
         beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws)
         self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
-                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy())
+                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy(),
+                      sensor_pose=placed)
         if steps.is_lost(beams, cfg, self._ref):
             self._counts["lost"] += 1
             return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
@@ -246,12 +249,13 @@ class MapUpdater:
         self._n_changed += steps.decide(hist, seen, ref, self._decided, n_moved,
                                         self._ref.shape[1], cfg, ws)
 
-    def _sensor_for_scan(self, sensor_pose: Pose2D, pose_check):
-        """(sensor (gx, gy, yaw), None, "") for a scan to process: the given pose, or the one the
-        pose check refined it to; (None, status, reason) for one to skip."""
-        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
+    def _placed_pose(self, sensor_pose: Pose2D, pose_check):
+        """(pose, None, "") for a scan to process: the given sensor pose, or the one the pose
+        check refined it to; (pose or None, status, reason) for one to skip."""
+        placed = sensor_pose
         verdict = PoseVerdict.accepted()
-        if pose_check is not None and self._on_map(sensor):
+        if pose_check is not None and self._on_map(steps.to_grid(placed, self._origin,
+                                                                 self._res)):
             verdict = pose_check()
             if not isinstance(verdict, PoseVerdict):
                 raise UpdaterError(f"pose_check must return a gridmap.PoseVerdict, got "
@@ -260,12 +264,12 @@ class MapUpdater:
                 if not verdict.sensor_pose.is_finite():
                     raise UpdaterError(f"pose_check returned a non-finite sensor pose "
                                        f"{verdict.sensor_pose}")
-                sensor = steps.to_grid(verdict.sensor_pose, self._origin, self._res)
-        if not self._on_map(sensor):
-            return None, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
+                placed = verdict.sensor_pose
+        if not self._on_map(steps.to_grid(placed, self._origin, self._res)):
+            return placed, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
         if verdict.is_refused:
             return None, ScanStatus.REFUSED, verdict.reason
-        return sensor, None, ""
+        return placed, None, ""
 
     def _on_map(self, sensor: np.ndarray) -> bool:
         height, width = self._ref.shape
@@ -396,14 +400,14 @@ class MapUpdater:
                                                           self._ref.shape[1], self.config)
         if self.config.grow_into_unknown:
             self._n_drawn = int(steps.kernels().decide_drawn(
-                self._hitbuf.reshape(-1), ref, self._enclosed, mask, self.config.threshold,
-                self.config.unanimous_min, self._drawn))
+                self._hitbuf.reshape(-1), ref, self._enclosed, mask=mask,
+                threshold=self.config.threshold, few=self.config.unanimous_min,
+                drawn=self._drawn))
 
     @classmethod
     def load(cls, path) -> MapUpdater:
         """An updater in exactly the state ``save`` wrote."""
         path = Path(path)
-        from gridmap.files import FileInputError, check_regular_file
 
         try:
             check_regular_file(path, "updater state file")

@@ -1,4 +1,4 @@
-"""The steps of ALGORITHM.md, one function each, in the order a scan goes through them:
+"""The steps of docs/algorithm.md, one function each, in the order a scan goes through them:
 ``classify_beams`` -> ``is_lost`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` ->
 ``push_flags`` -> ``decide``. The rules that are not in the paper are steps of their own:
 ``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the changed-cells
@@ -38,9 +38,8 @@ def kernels():
 @dataclass
 class Beams:
     """The classifier's result for one scan and the per-beam quantities the evaluators use
-    (some are views into the workspace: valid until the next scan). ``verdict`` holds one of
-    INVALID, UNCHANGED, SKIPPED, CHANGE per beam; the float arrays are NaN for invalid
-    beams."""
+    (some are views into the workspace: valid until the next scan). ``verdict`` holds a
+    ``BeamVerdict`` per beam; the float arrays are NaN for invalid beams."""
 
     sensor: np.ndarray      # (gx, gy, yaw) [grid units, rad]
     ranges: np.ndarray      # [m], float64
@@ -53,7 +52,6 @@ class Beams:
     valid: int              # valid beams
     raw_changes: int        # detected changes before the run filter
     changes: int            # detected changes kept by the run filter
-    flag_capacity: int      # no evaluator can flag more cells than this in this scan
     # per beam, for the lost check: the beam's own expected point, whether its virtual ray
     # found a blocking cell, the ray's direction, and whether the beam is a detected change
     own_expected: np.ndarray | None = None
@@ -133,7 +131,7 @@ def valid_ranges(scan: Scan, r_hi: float, ws: Workspace) -> np.ndarray:
 
 
 def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
-    """The range-dependent distances of ALGORITHM.md for every beam, from the config: D(r_i)
+    """The range-dependent distances of docs/algorithm.md for every beam, from the config: D(r_i)
     and tol(r_i) [grid units], and the removed-obstacle skip [m]."""
     return (cfg.pairing_distance(ranges) / res, cfg.new_obstacle_radius(ranges) / res,
             cfg.removed_skip(ranges))
@@ -177,13 +175,15 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     half = int(math.floor(math.radians(cfg.window_deg) / abs(step) + 1e-9)) if n else 0
     wrap = scan.covers_full_circle()
     pairing, tol, skip = beam_distances(ranges, res, cfg)
-    raw = k.classify(ws.hits, ws.valid, pairing, ws.expected, ws.found, half, wrap, ws.change)
+    raw = k.classify(ws.hits, ws.valid, pairing=pairing, expected=ws.expected, found=ws.found,
+                     half_window=half, wrap=wrap, out_change=ws.change)
     kept = k.run_filter(ws.change, cfg.min_run, wrap, ws.keep)
     k.beam_verdicts(ws.valid, ws.keep, cfg.n_skip, wrap, ws.verdict)
-    capacity = min(bound, ref.size)
-    ws.for_flags(capacity + n)     # room for an unchanged flag at each beam's hit cell too
+    # No evaluator can flag more cells than the bound or the map holds; the n more leave room
+    # for an unchanged flag at each beam's hit cell.
+    ws.for_flags(min(bound, ref.size) + n)
     return Beams(sensor, ranges, ws.hits, pairing, tol, skip, np.full(n, cfg.free_fraction),
-                 ws.verdict, n_valid, raw, kept, capacity, ws.expected[::ratio][:n],
+                 ws.verdict, n_valid, raw, kept, ws.expected[::ratio][:n],
                  ws.found[::ratio][:n], virtual[::ratio][:n], ws.change[:n])
 
 
@@ -204,7 +204,7 @@ def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarra
 def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
     """More than ``lost_fraction`` of the valid beams disagree with the map (counted before the
     run filter): the pose is probably wrong, so the scan is dropped. A beam that is a change
-    because it looks into unknown space says nothing of the pose (ALGORITHM.md, a partly
+    because it looks into unknown space says nothing of the pose (docs/algorithm.md, a partly
     mapped place), so such a scan is dropped only if the beams whose expected ray ends in
     known space are changes past ``lost_fraction`` too. (Never more scans than the paper's
     rule: that is asked first, and costs nothing.)"""
@@ -223,24 +223,25 @@ def guard_seen_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: 
     the cells of M within ``seen_surface_radius`` of the hit point of any valid beam that are
     occupied, or unknown outside the ``enclosed`` regions: surfaces this scan sees. Under a
     pose error below a cell the rays that graze an object's corner cross its outline cells
-    while the beams that hit the object say it is still there (README, "Choices"). Only scans
+    while the beams that hit the object say it is still there (docs/choices.md). Only scans
     with detected changes need it. Returns the count marked, for ``release_seen_surfaces``."""
     radius = cfg.seen_surface_radius / res
     if radius <= 0 or not (beams.changes or cfg.grow_into_unknown):
         return 0
     side = 2 * int(math.ceil(radius)) + 1
     ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size))
-    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict, radius,
-                                        unknown_guard(cfg, res), marks, ws.protected)
+    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict, radius=radius,
+                                        unknown_radius=unknown_guard(cfg, res), marks=marks,
+                                        out=ws.protected)
 
 
 def unknown_guard(cfg: UpdaterConfig, res: float) -> float:
     """The seen-surface guard's radius [grid units] for open unknown cells: the whole radius
     with the paper's rules; growing into the unknown, one cell at most. There the cells a scan
     hits keep out of its walks anyway (``list_unknown_hits``), and a guard of 1.5 cells kept
-    the free space from ever reaching a wall M had not seen (on the Intel log, 12 % of the
-    cells observed 7 times stayed unknown, against 9.5 % with one cell); none at all let rays
-    grazing a rack's corner that M had as unknown free it under 5 cm of pose error."""
+    the free space from ever reaching a wall M had not seen (on the Intel log more of the
+    well-observed cells stayed unknown than with one cell); none at all let rays grazing a
+    rack's corner that M had as unknown free it under 5 cm of pose error."""
     radius = cfg.seen_surface_radius / res
     return min(radius, 1.0) if cfg.grow_into_unknown else radius
 
@@ -261,9 +262,11 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
     them, get none). Returns (cells flagged, new-obstacle flags)."""
     k = kernels()
     reach = 1.0 - beams.skip / beams.ranges     # p_th as a fraction of the way to the hit
-    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach, beams.verdict, marks,
-                                 ws.cells, ws.changed)
-    n_all = k.flag_new_obstacles(ref, beams.hits, beams.tol, beams.verdict, marks, ws.changed, n)
+    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach=reach,
+                                 verdict=beams.verdict, marks=marks, cells=ws.cells,
+                                 out=ws.changed)
+    n_all = k.flag_new_obstacles(ref, beams.hits, tol=beams.tol, verdict=beams.verdict,
+                                 marks=marks, out=ws.changed, n=n)
     return n_all, n_all - n
 
 
@@ -273,7 +276,7 @@ def fill_gaps(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     """With ``cfg.fill_gaps``: a hit that pairs with M but lands in a cell with nothing of M
     within ``fill_gaps_clearance`` also gets a changed flag, appended to ``ws.changed`` after
     the first n (each cell once, ``marks``). The pairing distance D(r) otherwise hides the gaps
-    of a face that an earlier session mapped only in pieces (README, "fill_gaps").
+    of a face that an earlier session mapped only in pieces (docs/choices.md, "fill_gaps").
 
     The free walk of an agreeing beam then reaches to ``fill_gaps_free_margin`` short of the
     hit where that is further than ``free_fraction`` of its range (beyond 3.75 m at the
@@ -283,7 +286,8 @@ def fill_gaps(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     if not cfg.fill_gaps:
         return n, 0
     clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
-    n_all = kernels().flag_gaps(ref, beams.hits, beams.verdict, clearance, marks, ws.changed, n)
+    n_all = kernels().flag_gaps(ref, beams.hits, beams.verdict, clearance=clearance, marks=marks,
+                                out=ws.changed, n=n)
     margin = cfg.fill_gaps_free_margin
     if margin > 0:
         longer = margin < beams.ranges
@@ -309,8 +313,9 @@ def flag_unchanged_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
     Free cells: every free cell on the beam up to ``beams.free_reach`` of the way to the hit
     (``free_fraction``, or further with ``fill_gaps``). Returns the count of cells flagged."""
     k = kernels()
-    n = k.flag_free_unchanged(ref, beams.sensor, beams.hits, beams.free_reach, beams.verdict,
-                              marks, ws.cells, ws.unchanged)
+    n = k.flag_free_unchanged(ref, beams.sensor, beams.hits, reach=beams.free_reach,
+                              verdict=beams.verdict, marks=marks, cells=ws.cells,
+                              out=ws.unchanged)
     return k.flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks, ws.unchanged, n)
 
 
@@ -344,13 +349,12 @@ def flag_hit_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, marks: 
     beside it should still go (flagging the 4-neighbours of such hits kept a removed object's
     cell in the simulated W2).
 
-    Measured (README's main job and its soak benchmark): in the simulated warehouse it changes
-    nothing in W2 and W3 and removes 2 false changes of W4; the 50 soak sessions, each run
-    with and without it on the same M(i-1), differ in 9 cells: 7 of them remnants of removed
-    objects, next to remnants both runs keep, that some beam hit (5 targets of 20 784 left
-    unfixed), 1 a face kept that the paper's rules freed, 1 unobservable. On
-    the Killian Court log (a map of its first third updated with its last third) it keeps
-    the 3 cells occupied in both thirds' maps that the update used to free. Returns the new
+    In the main job of the simulated warehouse it changes nothing in W2 and W3 and removes a
+    few false changes of W4; in the soak sessions, each run with and without it on the same
+    M(i-1), the few cells that differ are mostly remnants of removed objects that some beam
+    hit, next to remnants both runs keep; on the Killian Court log (a map of its first third
+    updated with its last third) it keeps the cells occupied in both thirds' maps that the
+    update used to free (figures: docs/choices.md and benchmarks/RESULTS.md). Returns the new
     count."""
     if not (cfg.confirm_hit_surfaces and beams.changes):
         return n    # no change, so no beam the rule is for
@@ -365,8 +369,9 @@ def list_unknown_hits(ref: np.ndarray, beams: Beams, enclosed: np.ndarray, hit_m
     outside the enclosed regions) into ``ws.hits_unknown``, kept from the scan's walks (their
     changed-flag marks set until ``release_unknown_hits``). Returns the count."""
     ws.for_unknown_hits(beams.hits.shape[0])
-    return int(kernels().list_unknown_hits(ref, enclosed, beams.hits, beams.verdict, hit_marks,
-                                           ch_marks, ws.hits_unknown))
+    return int(kernels().list_unknown_hits(ref, enclosed, beams.hits, beams.verdict,
+                                           hit_marks=hit_marks, ch_marks=ch_marks,
+                                           out=ws.hits_unknown))
 
 
 def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarray,
@@ -385,8 +390,9 @@ def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarra
     short = max(cfg.seen_surface_radius, res)
     with np.errstate(invalid="ignore", divide="ignore"):
         reach = np.where(beams.ranges > short, 1.0 - short / beams.ranges, 0.0)
-    return int(kernels().flag_open_unknown_walks(ref, enclosed, beams.sensor, beams.hits, reach,
-                                                 into, marks, ws.cells, ws.changed, n))
+    return int(kernels().flag_open_unknown_walks(ref, enclosed, beams.sensor, beams.hits,
+                                                 reach=reach, into_unknown=into, marks=marks,
+                                                 cells=ws.cells, out=ws.changed, n=n))
 
 
 def release_unknown_hits(ch_marks: np.ndarray, un_marks: np.ndarray, n_hits: int,
@@ -407,9 +413,10 @@ def push_hits(hitbuf_flat: np.ndarray, ref: np.ndarray, enclosed: np.ndarray, n_
     observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
     many) is drawn: occupied in the output. Returns the change of the drawn count."""
     return int(kernels().push_hits(hitbuf_flat, ref.reshape(-1), enclosed,
-                                   ws.hits_unknown[:n_hits], ws.changed[:n_changed],
-                                   buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
-                                   hit_marks, drawn))
+                                   hit_cells=ws.hits_unknown[:n_hits],
+                                   changed=ws.changed[:n_changed], mask=buffer_mask(cfg),
+                                   threshold=cfg.threshold, few=cfg.unanimous_min,
+                                   hit_marks=hit_marks, drawn=drawn))
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -425,9 +432,10 @@ def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
     a cell ever got, saturating at 255). Only flagged cells are touched. Returns the count of
     entries written to ``ws.moved`` (cells whose decision inputs changed)."""
     ws.for_moved(n_changed + n_unchanged)
-    return kernels().push_flags(hist_flat, seen_flat, ref_flat, ws.changed[:n_changed],
-                                ws.unchanged[:n_unchanged], buffer_mask(cfg), cfg.threshold,
-                                cfg.unanimous_min, ch_marks, un_marks, ws.moved)
+    return kernels().push_flags(hist_flat, seen_flat, ref_flat, changed=ws.changed[:n_changed],
+                                unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg),
+                                threshold=cfg.threshold, few=cfg.unanimous_min,
+                                ch_marks=ch_marks, un_marks=un_marks, out_moved=ws.moved)
 
 
 def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
@@ -437,18 +445,18 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
     fewer than T times says changed; or n_c plus the 8-neighbours of the same state in M with
     n >= T reaches T) for the cells whose inputs changed this scan. Returns the change of the
     number of changed cells."""
-    return kernels().decide(hist_flat, seen_flat, ref_flat, decided, ws.moved[:n_moved], width,
-                            buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
-                            cfg.neighbour_support)
+    return kernels().decide(hist_flat, seen_flat, ref_flat, decided, moved=ws.moved[:n_moved],
+                            width=width, mask=buffer_mask(cfg), threshold=cfg.threshold,
+                            few=cfg.unanimous_min, support=cfg.neighbour_support)
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,
                cfg: UpdaterConfig) -> tuple[np.ndarray, int]:
     """The decision rule over the whole map: (decided bits, count of changed cells)."""
     decided = np.zeros((ref_flat.size + 7) // 8, np.uint8)
-    count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width,
-                                 buffer_mask(cfg), cfg.threshold, cfg.unanimous_min,
-                                 cfg.neighbour_support)
+    count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width=width,
+                                 mask=buffer_mask(cfg), threshold=cfg.threshold,
+                                 few=cfg.unanimous_min, support=cfg.neighbour_support)
     return decided, int(count)
 
 
@@ -464,8 +472,8 @@ def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
     not closed. Returns (cells, count closed by the last check)."""
     out = ref.copy()
     hist = np.zeros(0, np.uint16) if seen_through is None else seen_through.reshape(-1)
-    closed = kernels().apply_changes(ref.reshape(-1), decided, enclosed, ref.shape[1],
-                                     last_check, hist, out.reshape(-1))
+    closed = kernels().apply_changes(ref.reshape(-1), decided, enclosed, width=ref.shape[1],
+                                     close=last_check, hist=hist, out=out.reshape(-1))
     if drawn is not None:
         kernels().apply_drawn(drawn, out.reshape(-1))
     return out, int(closed)

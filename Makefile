@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test test-all bench setup ros1 clean readme-tables
+.PHONY: run test test-all bench setup ros1 clean run-tables
 
 $(BIN)/mapupdate: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -32,7 +32,7 @@ bench: setup
 clean:
 	rm -rf $(VENV) build *.egg-info
 
-# Run the built-in warehouse with its default seed and copy the tables into README.md.
-readme-tables: setup
-	$(BIN)/mapupdate run --out runs/readme --no-progress
-	$(BIN)/python -m scenarios.readme runs/readme
+# Run the built-in warehouse with its default seed and copy the tables into docs/main_job.md.
+run-tables: setup
+	$(BIN)/mapupdate run --out runs/tables --no-progress
+	$(BIN)/python -m scenarios.run_tables runs/tables

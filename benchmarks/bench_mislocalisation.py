@@ -13,7 +13,7 @@ plus an injected error, with the simulator's odometry for gating, as the runner 
 Per error level, summed over its variants: G-occupied cells freed (cells occupied in G2, a wall
 or an object's outline, that the updater made free), how many of them belong to the building's
 structure (walls and static objects: racks, shelves), holes (those of them with no occupied cell
-of the output within one cell: the outline is broken there), incorrect changes (EVALUATION.md,
+of the output within one cell: the outline is broken there), incorrect changes (docs/evaluation.md,
 one cell of slack), and scans dropped by the lost check or refused by the pose check. The
 "guarded" columns use the safeguard, ``localization.confidence.PoseCheck`` with its defaults
 (without a localiser here, only its scan-fit part, not its covariance part): it refuses a scan
@@ -149,7 +149,7 @@ def injected_poses(true: np.ndarray, error: Error) -> np.ndarray:
 def replay(rec: Recording, poses: np.ndarray, guard=None, config=None) -> Damage:
     """Feed the recorded scans to a fresh updater on M1 at ``poses``; score the output."""
     import evaluation as ev
-    from scenarios.pipeline import RobotPipeline
+    from robot.pipeline import RobotPipeline
     from updater import MapUpdater
 
     upd = MapUpdater(rec.reference, config)

@@ -50,9 +50,9 @@ def one_case(job):
     from evaluation.edited_world import make_case
     from gridmap import load_map
     from robotlogs import log_observations
-    from scenarios.logmap import map_from_log
-    from scenarios.replay import update_from_log
-    from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+    from robot.logmap import map_from_log
+    from robot.replay import LogSource, Outputs, update_from_log
+    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from updater import UpdaterConfig
 
     name, seed, people, work, overrides, methods = job
@@ -71,8 +71,8 @@ def one_case(job):
         cfg = {"ungated": replace(robot, gating=False),
                "authors_gate": UpdaterConfig(grow_into_unknown=True)}.get(method, robot)
         out = case_dir / f"out-{method}.yaml"
-        s = update_from_log(case_dir / "stale.yaml", case_dir / "log.clf", out,
-                            updater_config=cfg, progress=False,
+        s = update_from_log(case_dir / "stale.yaml", LogSource(case_dir / "log.clf"),
+                            Outputs(out), updater_config=cfg,
                             method=method if method in ("hybrid", "fuse") else "paper")
         sc = score_case(case_dir, load_map(out))
         rows.append({"log": name, "seed": seed, "people": people, "method": method,
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.logs:                       # maps first, once each
-            from scenarios.logmap import map_from_log
+            from robot.logmap import map_from_log
             map_from_log(DATA / f"{name}.log.gz", Path(tmp) / f"{name}.yaml", progress=False)
         jobs = [(n, s, p, tmp, overrides, args.methods) for n in args.logs for s in args.seeds
                 for p in args.people]
@@ -130,8 +130,8 @@ def partly_mapped(job):
     from gridmap import load_map, save_map
     from gridmap.mapping import build_map
     from robotlogs.carmen import read_carmen
-    from scenarios.replay import update_from_log
-    from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+    from robot.replay import LogSource, Outputs, update_from_log
+    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from updater import UpdaterConfig
 
     name, work, overrides = job
@@ -145,8 +145,8 @@ def partly_mapped(job):
     laser = [i for i, line in enumerate(lines) if line.startswith(("FLASER", "ROBOTLASER"))]
     (work / f"{name}-rest.log").write_text("\n".join(lines[laser[cut]:]) + "\n")
     cfg = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
-    s = update_from_log(work / f"{name}-part.yaml", work / f"{name}-rest.log",
-                        work / f"{name}-grown.yaml", updater_config=cfg, progress=False)
+    s = update_from_log(work / f"{name}-part.yaml", LogSource(work / f"{name}-rest.log"),
+                        Outputs(work / f"{name}-grown.yaml"), updater_config=cfg)
     counts = observed_counts(before, [(r.scan, r.laser_pose) for r in scans[cut:]],
                              cfg.max_range)
     g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole, counts)

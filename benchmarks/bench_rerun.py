@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def timed_run(out: Path, rrd: Path | None, quick: bool) -> float:
-    cmd = [sys.executable, "-m", "scenarios", "run", "--out", str(out), "--no-progress"]
+    cmd = [sys.executable, "-m", "mapupdate", "run", "--out", str(out), "--no-progress"]
     cmd += ["--quick"] if quick else []
     cmd += ["--rerun", str(rrd)] if rrd is not None else []
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}

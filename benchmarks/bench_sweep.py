@@ -47,7 +47,7 @@ def write_spec(folder: Path, layouts: int, seeds: int) -> Path:
 
 
 def timed_sweep(spec: Path, out: Path, **kw) -> float:
-    from scenarios.sweep import run_sweep
+    from studies.sweep import run_sweep
 
     t0 = time.perf_counter()
     run_sweep(spec, out, progress=False, **kw)
@@ -73,7 +73,7 @@ def _children_cpu() -> float:
 
 
 def measure(layouts: int, seeds: int, workers: int) -> dict:
-    from scenarios import sweep_ray
+    from studies import sweep_ray
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -1,12 +1,14 @@
-"""Scenario files, the robot pipeline, the session runner, the log replay, reports, the command line and the
-gymnasium environment: where the simulator, the localiser and the updater meet.
+"""The testbed: scenario files and their catalog, generated warehouses, the session runner,
+checkpoints, reports, session bags, the gymnasium environment (``scenarios.gym``) and the
+rerun and top-view drawing. The robot software it drives lives in ``robot``; the studies that
+compare methods over many runs in ``studies``.
 
-Importing this package registers the environment ``WarehouseMapUpdate-v0`` with gymnasium
-(at once if gymnasium is loaded, else as soon as it is), without importing gymnasium itself:
-the command line starts faster without it.
+The gymnasium environment ``WarehouseMapUpdate-v0`` is registered by ``import scenarios.gym``
+(or ``gymnasium.make("scenarios.gym:WarehouseMapUpdate-v0")``), so that importing the testbed
+does not load gymnasium.
 """
 
-import sys
+import importlib
 
 from .catalog import DEFAULT_SCENARIO, ScenarioNotFound, builtin_scenarios, find_scenario
 
@@ -16,48 +18,11 @@ _LAZY = {"evaluate": "gym.policies", "EvaluationTable": "gym.policies",
 
 
 def __getattr__(name):
-    # the gymnasium side (and the generator) is loaded on first use only
+    # gymnasium and the simulator are loaded on first use only
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-
-class _RegisterWhenImported:
-    """A finder on ``sys.meta_path`` that lets gymnasium load as usual and then registers the
-    environment; it removes itself at gymnasium's first import."""
-
-    def find_spec(self, name, path=None, target=None):
-        if name != "gymnasium":
-            return None
-        import importlib.util
-
-        sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
-        if spec is not None and spec.loader is not None:
-            exec_module = spec.loader.exec_module
-
-            def exec_and_register(module):
-                exec_module(module)
-                _register_env()
-
-            spec.loader.exec_module = exec_and_register
-        return spec
-
-
-def _register_env() -> None:
-    if f"{__name__}.gym.env" in sys.modules:
-        return      # the env module registers the environment at the end of its own import
-    if "gymnasium" in sys.modules:
-        from .gym.env import register
-
-        register()
-    elif not any(isinstance(f, _RegisterWhenImported) for f in sys.meta_path):
-        sys.meta_path.insert(0, _RegisterWhenImported())
-
-
-_register_env()
 
 __all__ = ["DEFAULT_SCENARIO", "ScenarioNotFound", "builtin_scenarios", "find_scenario",
            "evaluate", "EvaluationTable", "RouteFollowingPolicy", "WarehouseMapUpdateEnv",

@@ -22,16 +22,24 @@ number of sessions finished.
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import hashlib
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
 
-from gridmap import MapUpdatingError
+from gridmap import MapUpdatingError, load_map
 from gridmap.atomic import write_atomically, write_with
+from gridmap.files import read_text
+from robot.robot_config import section_config
 
+from .catalog import find_scenario
 from .options import RunOptions
+from .report import json_default, session_output_paths, write_session_outputs
+from .session import SessionResult, Trajectory
 
 FORMAT = 1
 
@@ -54,9 +62,6 @@ class RunFolderLock:
         self._file = None
 
     def __enter__(self) -> RunFolderLock:
-        import fcntl
-        import os
-
         self.path.parent.mkdir(parents=True, exist_ok=True)
         f = open(self.path, "a+")
         try:
@@ -83,8 +88,6 @@ class RunFolderLock:
 def remove_partial_files(out_dir) -> list[Path]:
     """Remove the temporary files a killed run left half-written (``gridmap.atomic`` names
     them ``.<name>.<pid>.<thread>.tmp``; they never got their real name). Returns them."""
-    import re
-
     pattern = re.compile(r"\..+\.\d+(\.\d+)?\.tmp")
     gone = [p for p in Path(out_dir).rglob(".*.tmp") if p.is_file() and pattern.fullmatch(p.name)]
     for p in gone:
@@ -104,14 +107,10 @@ def check_new_run_folder(out_dir) -> None:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    from .report import json_default
-
     write_atomically(path, json.dumps(data, indent=1, default=json_default) + "\n")
 
 
 def _read_json(path: Path) -> dict:
-    from gridmap.files import read_text
-
     try:
         data = json.loads(read_text(path, "run state file"))
     except FileNotFoundError:
@@ -163,8 +162,6 @@ def resume_options(scenario, options):
     an option or scenario given that contradicts it is refused, since the resumed run would
     then not be the same run. ``sessions`` may be given (a run can be continued further);
     without it the run goes as far as it was asked to."""
-    from .catalog import find_scenario
-
     if options.out is None:
         raise ResumeError("resuming needs the folder of the run to resume")
     path = state_dir(options.out) / "run.json"
@@ -202,8 +199,6 @@ def resume_options(scenario, options):
 
 def _recorded_config(section: str, values, path: Path, key: str):
     """A configuration run.json recorded under ``key``, read as a --config file's section."""
-    from .robot_config import section_config
-
     try:
         return section_config(section, values, str(path), where=f"'{key}'")
     except MapUpdatingError as e:
@@ -229,10 +224,6 @@ def finished_sessions(out_dir, scenario, n: int) -> tuple[list, float]:
     """The results of the sessions a run in ``out_dir`` finished (at most ``n``), read back as
     a run keeps them (see ``runner.RunResult``): the last one whole, the first with M1, the
     others their name and metrics only; and the wall time they took."""
-    from gridmap import load_map
-
-    from .session import SessionResult
-
     path = state_dir(out_dir) / "progress.json"
     if not path.exists():
         return [], 0.0
@@ -261,10 +252,6 @@ def _metrics(out_dir, name: str) -> dict:
 def load_session(out_dir, name: str, previous: str | None = None):
     """The full result of the finished session ``name``, read back from ``out_dir``;
     ``previous``: the name of the session before it (None for the mapping session)."""
-    from gridmap import load_map
-
-    from .session import SessionResult, Trajectory
-
     maps = Path(out_dir) / "maps"
     res = SessionResult(name, load_map(maps / f"M_{name}.yaml"),
                         load_map(maps / f"G_{name}.yaml"), metrics=_metrics(out_dir, name))
@@ -281,8 +268,6 @@ def restore_session_outputs(out_dir, names: list[str]) -> list[str]:
     """Write the TUM trajectories and figures of the finished update sessions ``names[1:]``
     that lack them (a run folder of an earlier version wrote them only at the end of the
     run), with one session in memory at a time. Returns the names of the sessions written."""
-    from .report import session_output_paths, write_session_outputs
-
     written = []
     for k in range(1, len(names)):
         if all(p.exists() for p in session_output_paths(out_dir, names[k])):

@@ -26,14 +26,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
+import yaml
 
-from gridmap import MapUpdatingError
-
-if TYPE_CHECKING:
-    import sim
+import sim
+from gridmap import MapUpdatingError, Pose2D
+from gridmap.atomic import write_atomically
+from sim import geometry as geo, lidar as lid
+from sim.validate import objects_overlap
 
 SIZE_MIN, SIZE_MAX = (15.0, 10.0), (60.0, 40.0)
 MAX_SESSIONS = 100         # sessions of one scenario (each a few minutes of simulated time)
@@ -117,8 +118,6 @@ def _rack_rows(rng, y_lo: float, y_hi: float) -> list[tuple[float, float]]:
 
 
 def _racks(rows, x_lo: float, x_hi: float):
-    import sim
-
     length = x_hi - x_lo
     n_bays = max(1, math.ceil(length / 14.0))
     gap = 1.5 if n_bays > 1 else 0.0     # pass-throughs between bays, the same in every row
@@ -152,8 +151,6 @@ def _layout(rng, w: float, h: float, fov: int) -> Layout:
 
 
 def _pillars(rng, layout: Layout) -> list:
-    import sim
-
     x0, y0, x1, y1 = layout.bounds
     n = max(2, int((x1 - x0) * (y1 - y0) // 120))
     out: list = []
@@ -171,8 +168,6 @@ def _pillars(rng, layout: Layout) -> list:
 def _fits(o, layout: Layout, others) -> bool:
     """Inside the walls, clear of every other object by OBJECT_GAP and of every lane by the
     robot's radius plus LANE_CLEARANCE."""
-    from sim import geometry as geo
-
     grown = replace(o, radius=o.radius + OBJECT_GAP / 2) if o.is_circle else \
         replace(o, size=(o.size[0] + OBJECT_GAP, o.size[1] + OBJECT_GAP))
     inside = geo.circle_inside(grown.circle(), layout.bounds) if o.is_circle else \
@@ -186,7 +181,6 @@ def _fits(o, layout: Layout, others) -> bool:
             geo.segment_box_distance(a, b, o.box()[None])
         if float(d[0]) < clear:
             return False
-    from sim.validate import objects_overlap
 
     return not any(objects_overlap(grown, q) for q in others if q.id != o.id)
 
@@ -194,8 +188,6 @@ def _fits(o, layout: Layout, others) -> bool:
 def _new_object(rng, oid_kind: tuple[str, str], area) -> sim.Obstacle:
     """An object of ``kind`` (pallet, drum, box) with its centre drawn in ``area``
     (x_lo, y_lo, x_hi, y_hi)."""
-    import sim
-
     oid, kind = oid_kind
     c = (_r(rng.uniform(area[0], area[2])), _r(rng.uniform(area[1], area[3])))
     if kind == "drum":
@@ -265,9 +257,6 @@ def lidar_hits(layout: Layout, objects, poses: np.ndarray) -> np.ndarray:
     """Hit points (N, beams, 2) of noise-free scans from robot ``poses`` (N, 3) among
     ``objects`` (the world as it stands, no people); far away where a beam has no hit within
     SEEN_RANGE."""
-    from sim import geometry as geo
-    from sim import lidar as lid
-
     spec = _lidar_spec(layout)
     boxes, circles = geo.obstacle_arrays(objects, layout.bounds, 0.13)
     sensors = lid.sensor_poses(poses, spec.mount)
@@ -281,8 +270,6 @@ def lidar_hits(layout: Layout, objects, poses: np.ndarray) -> np.ndarray:
 def seen_in(hits: np.ndarray, target) -> bool:
     """Whether the scans of ``hits`` (from ``lidar_hits``) see ``target`` as the evaluation
     needs: at least SEEN_CELLS cells of its outline (5 cm) hit from SEEN_POSES scans or more."""
-    from sim import geometry as geo
-
     reach = target.radius if target.is_circle else math.hypot(*target.size) / 2
     cx, cy = target.center
     # only the hits near the object need the exact distance
@@ -299,9 +286,6 @@ def seen_in(hits: np.ndarray, target) -> bool:
 
 
 def _lidar_spec(layout: Layout):
-    import sim
-    from gridmap import Pose2D
-
     ld = layout.lidar
     return sim.LidarSpec(mount=Pose2D(*ld["mount"]), fov_deg=ld["fov_deg"], beams=ld["beams"],
                          range_min=ld["range_min"], range_max=ld["range_max"])
@@ -481,8 +465,6 @@ def _initial_objects(rng, layout: Layout, counters: dict) -> dict:
 def generate(seed: int, size=(30.0, 20.0), sessions: int = 4, fov: int = 270) -> dict:
     """The YAML tree of a generated warehouse scenario (see the module docstring); the same
     arguments give the same tree. Raises ``GenerateError`` for arguments out of range."""
-    import sim
-
     w, h = check_arguments(size, sessions, fov)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise GenerateError(f"seed must be a non-negative integer, got {seed!r}")
@@ -548,8 +530,6 @@ def _emit(key: str, value, indent: int, out: list[str]) -> None:
 
 
 def _flow(value) -> str:
-    import yaml
-
     # a one-item list keeps yaml from adding its document end marker to a plain scalar
     return yaml.safe_dump([value], default_flow_style=True, sort_keys=False,
                           width=10**6).strip()[1:-1]
@@ -558,8 +538,6 @@ def _flow(value) -> str:
 def write_generated(seed: int, out, size=(30.0, 20.0), sessions: int = 4,
                     fov: int = 270) -> Path:
     """Write ``generate(seed, ...)`` to ``out`` (atomically) and return the path."""
-    from gridmap.atomic import write_atomically
-
     tree = generate(seed, size, sessions, fov)
     w, h = check_arguments(size, sessions, fov)
     header = (f"generated by: mapupdate generate --seed {seed} --size {w:g} {h:g} "

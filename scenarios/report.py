@@ -10,21 +10,19 @@ from __future__ import annotations
 
 import gc
 import json
-import math
 import os
 import platform
 from pathlib import Path
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED, OccupancyGrid
+from gridmap import FREE, OCCUPIED, OccupancyGrid, save_map
 from gridmap.atomic import write_atomically, write_with
+from robotlogs.tum import write_tum
 
 
 def write_session_maps(out_dir: Path, result) -> None:
     """M_i and G_i of one session as map_server YAML + PGM."""
-    from gridmap import save_map
-
     maps = Path(out_dir) / "maps"
     maps.mkdir(parents=True, exist_ok=True)
     idx = result.name
@@ -35,13 +33,6 @@ def write_session_maps(out_dir: Path, result) -> None:
     if result.masks:
         # per-cell evaluation masks, for anyone who wants to recompute or inspect the scores
         write_with(maps / f"masks_{idx}.npz", lambda f: np.savez_compressed(f, **result.masks))
-
-
-def write_tum(path: Path, time: np.ndarray, poses: np.ndarray) -> None:
-    """Trajectory in TUM format: ``t x y z qx qy qz qw`` with z = 0, yaw as a quaternion."""
-    lines = [f"{t:.6f} {p[0]:.6f} {p[1]:.6f} 0 0 0 {math.sin(p[2] / 2):.9f} "
-             f"{math.cos(p[2] / 2):.9f}" for t, p in zip(time, poses)]
-    write_atomically(path, "\n".join(lines) + ("\n" if lines else ""))
 
 
 def _fmt(v, digits=2) -> str:

@@ -46,9 +46,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
-
 import evaluation as ev
+from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
+from sim import geometry as geo
+
 from .topview import CELL_COLORS, UNCLASSIFIED, VERDICT_COLORS, scan_points
 
 MAP_PERIOD = 1.0          # [s] of simulated time between two logs of the maps at most
@@ -104,8 +105,6 @@ def _xyz(xy: np.ndarray, z: float) -> np.ndarray:
 
 def outlines(world) -> rr.LineStrips3D:
     """Walls and objects of a ``sim.World`` as closed outlines."""
-    from sim import geometry as geo
-
     strips = [np.vstack([c, c[:1]]) for c in geo.box_corners(world.boxes)]
     a = np.linspace(0.0, 2 * math.pi, 25)
     strips += [np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])

@@ -15,12 +15,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+import sim
 from gridmap import OccupancyGrid
+from gridmap.mapping import LogOddsMapper
 
 from . import checkpoint
 from .catalog import find_scenario
-from .options import RunOptions, SessionObserver
+from .options import RunError, RunOptions, SessionObserver
+from .report import write_outputs, write_session_maps, write_session_outputs
 from .session import SessionResult, UpdateSession, map_metrics, session_seeds
 
 MAX_SEED = 2**63 - 1
@@ -53,8 +57,6 @@ class RunResult:
 
 
 def _progress(enabled: bool, **kw):
-    from tqdm import tqdm
-
     return tqdm(disable=not enabled, dynamic_ncols=True, leave=False, **kw)
 
 
@@ -65,9 +67,6 @@ def _route_length(route) -> float:
 
 def build_initial_map(scenario, session: int, seeds: dict, progress: bool = False):
     """M1: log-odds mapping along the mapping route with the true sensor poses."""
-    import sim
-    from gridmap.mapping import LogOddsMapper
-
     world = sim.World(scenario, session, seeds["world"])
     mapper = LogOddsMapper(sim.grid_frame(scenario))
     mounts = [lidar.mount for lidar in scenario.robot.lidars]
@@ -94,8 +93,6 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
                        seeds: dict, options: RunOptions) -> SessionResult:
     """One session i >= 2: the robot follows its route; localise, update M_{i-1} into M_i,
     score against G_i."""
-    import sim
-
     world = sim.World(scenario, session, seeds["world"])
     us = UpdateSession(scenario, session, world, previous, initial, seeds["localizer"],
                        options.updater_config, options.localizer_config,
@@ -140,8 +137,6 @@ def default_out_dir(scenario_name: str) -> Path:
 
 def run_scenario(scenario: str | Path | None = None, options: RunOptions | None = None) -> RunResult:
     """Play every session of a scenario, write the outputs and return the results."""
-    import sim
-
     options = options or RunOptions()
     check_options(options)
     if options.resume:
@@ -165,8 +160,6 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
 
 def check_options(options: RunOptions) -> None:
     """Options no run can have, refused before anything is read or written."""
-    from .options import RunError
-
     if options.sessions is not None and (isinstance(options.sessions, bool) or
                                          not isinstance(options.sessions, int) or
                                          options.sessions < 1):
@@ -179,8 +172,6 @@ def check_options(options: RunOptions) -> None:
 
 def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions) -> RunResult:
     """The sessions of a run whose folder is locked (see ``run_scenario``)."""
-    from .report import write_outputs, write_session_maps, write_session_outputs
-
     seeds = session_seeds(seed, len(scn.sessions))
     wall0 = time.perf_counter()
 

@@ -15,9 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
-
 import evaluation as ev
+import sim
+from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
+from gridmap.metrics import compare_maps
+from localization import LocalizerConfig, MonteCarloLocalizer
+from localization.confidence import PoseCheck
+from robot.methods import make_method
+from robot.pipeline import RobotPipeline
 
 # The robot starts each session at its dock, whose pose is known to about this precision.
 START_STD = (0.05, 0.05, 0.02)  # x [m], y [m], yaw [rad]
@@ -33,8 +38,6 @@ def session_seeds(seed: int, n_sessions: int) -> list[dict[str, np.random.SeedSe
 
 
 def map_metrics(a: OccupancyGrid, b: OccupancyGrid) -> dict:
-    from gridmap.metrics import compare_maps
-
     return {k: float(v) for k, v in compare_maps(a, b).items()}
 
 
@@ -95,8 +98,6 @@ def localizer_config_for(scenario):
     one tunes AMCL's alphas for a robot: nav2's default alphas (0.2) are four to twenty times
     this robot's, and so wide a motion model lets the estimate slide along an aisle towards an
     old outline where the map is stale."""
-    from localization import LocalizerConfig
-
     a1, a2, a3, a4 = scenario.robot.odometry_noise
     return LocalizerConfig(alpha1=a1, alpha2=a2, alpha3=a3, alpha4=a4)
 
@@ -116,12 +117,6 @@ class UpdateSession:
                  initial: OccupancyGrid, localizer_seed, updater_config=None,
                  localizer_config=None, pose_check: bool = True, pose_check_config=None,
                  method: str = "paper"):
-        import sim
-        from localization import MonteCarloLocalizer
-        from localization.confidence import PoseCheck
-
-        from .methods import make_method
-        from .pipeline import RobotPipeline
 
         self.scenario, self.index, self.world = scenario, session, world
         self.name = scenario.sessions[session].name

@@ -14,10 +14,10 @@ sessions that all started at one time would look to a running node like time goi
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 from gridmap import Pose2D
-
 from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
 
@@ -84,8 +84,6 @@ class SessionBagRecorder:
 
 
 def _remove(path: Path) -> None:
-    import shutil
-
     if path.is_dir():
         shutil.rmtree(path)
     else:

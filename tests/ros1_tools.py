@@ -85,7 +85,7 @@ class Ros:
         return code == 1
 
     def node(self, *args, name="map_updater") -> subprocess.Popen:
-        p = self.start([sys.executable, "-m", "scenarios", "ros1", *args], name)
+        p = self.start([sys.executable, "-m", "mapupdate", "ros1", *args], name)
         self.wait(lambda: self.has_service(f"/{name}/save") or p.poll() is not None, 60,
                   "the map_updater node")
         return p

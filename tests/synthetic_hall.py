@@ -214,7 +214,7 @@ def gated(steps) -> list:
 def visible(steps, cells: np.ndarray, hits: int = 7) -> np.ndarray:
     """The cells of ``cells`` in which noise-free beams from the true poses of the scans the
     gate lets through end in at least ``hits`` scans (people left out): what the updater can
-    see often enough to decide (EVALUATION.md's observable cells, for hits)."""
+    see often enough to decide (docs/evaluation.md's observable cells, for hits)."""
     fov, beams = math.radians(270.0), 541
     angles = -fov / 2 + fov / (beams - 1) * np.arange(beams)
     world = WALLS + after()

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, Pose2D
-from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import MapUpdater, UpdaterConfig
 from updater.gating import (GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS,
                             Gate)

@@ -12,7 +12,7 @@ import pytest
 import evaluation as ev
 import sim
 from gridmap import Pose2D
-from scenarios.cli import main
+from mapupdate import main
 from scenarios.generator import GenerateError, ROUTE_STEP, generate, scenario_yaml, write_generated
 from sim import lidar as lid
 

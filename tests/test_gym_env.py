@@ -1,4 +1,4 @@
-"""The gymnasium environment: registered without importing gymnasium, passes gymnasium's
+"""The gymnasium environment: registered by its package, passes gymnasium's
 checker, replays a seed exactly, vectorises, and reproduces the runner's figures when the
 runner's own robot drives it."""
 
@@ -12,6 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import scenarios
+import scenarios.gym  # noqa: F401 - registers WarehouseMapUpdate-v0
 import sim
 from scenarios.gym.episode import StepOutcome, default_reward, initial_map
 from scenarios.gym.policies import RouteFollowingPolicy, evaluate, run_episode
@@ -59,16 +60,21 @@ def same(a, b) -> bool:
     return a == b
 
 
-def test_importing_scenarios_registers_the_env_without_importing_gymnasium():
+def test_the_env_package_registers_the_env_as_gymnasium_documents():
+    # the testbed alone does not load gymnasium; its env package registers the env, without
+    # loading the simulator until the first make
     code = ("import sys, scenarios\n"
             "print('gymnasium' in sys.modules)\n"
-            "import gymnasium\n"
-            "print('WarehouseMapUpdate-v0' in gymnasium.registry)\n")
+            "import scenarios.gym, gymnasium\n"
+            "print('WarehouseMapUpdate-v0' in gymnasium.registry, 'pymunk' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["False", "True"]
-    code = "import gymnasium, scenarios\nprint('WarehouseMapUpdate-v0' in gymnasium.registry)\n"
+    assert out.stdout.split() == ["False", "True", "False"]
+    # gymnasium's "module:EnvId" form imports the package on the way
+    code = ("import gymnasium\n"
+            "env = gymnasium.make('scenarios.gym:WarehouseMapUpdate-v0', quick=True)\n"
+            "print(type(env.unwrapped).__name__)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["True"]
+    assert out.stdout.split() == ["WarehouseMapUpdateEnv"]
     assert ENV_ID in gym.registry
 
 

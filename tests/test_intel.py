@@ -15,7 +15,7 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, load_map, save_map
 from gridmap.mapping import build_map
 from gridmap.metrics import cross_correlation, opdf
 from robotlogs.carmen import read_carmen
-from scenarios.replay import update_from_log
+from robot.replay import LogSource, Outputs, update_from_log
 
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 RES = 0.05
@@ -56,8 +56,8 @@ def intel(tmp_path_factory):
     first = build_map(frame, [(r.scan, r.laser_pose) for r in scans[:half]])
     second = build_map(frame, [(r.scan, r.laser_pose) for r in scans[half:]])
     save_map(first, d / "first.yaml")
-    summary = update_from_log(d / "first.yaml", INTEL, d / "updated.yaml",
-                              start_time=scans[half].time, progress=False)
+    summary = update_from_log(d / "first.yaml", LogSource(INTEL, start_time=scans[half].time),
+                              Outputs(d / "updated.yaml"))
     updated = load_map(d / "updated.yaml")
     observed = (first.data != UNKNOWN) & (second.data != UNKNOWN)
     result = {

@@ -8,13 +8,15 @@ import sys
 
 import pytest
 
-FORBIDDEN = ("sim", "scenarios", "pymunk", "rerun", "gymnasium")
+FORBIDDEN = ("sim", "scenarios", "studies", "pymunk", "rerun", "gymnasium", "matplotlib")
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "scenarios")
+PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "robot",
+            "scenarios", "studies", "mapupdate")
 
 
 @pytest.mark.parametrize("package", ["gridmap", "updater", "localization", "evaluation",
-                                     "robotlogs"])
+                                     "robotlogs", "robot", "robot.replay", "robot.logmap",
+                                     "robot.methods", "robot.ros1.node", "robot.ros1.settings"])
 def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     code = (
         "import sys, importlib\n"
@@ -28,7 +30,13 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
 
 @pytest.mark.parametrize("package, allowed", [
     ("gridmap", set()), ("updater", {"gridmap"}), ("localization", {"gridmap"}),
-    ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"})])
+    ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"}),
+    ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation"}),
+    ("scenarios", {"gridmap", "sim", "updater", "localization", "evaluation", "robotlogs",
+                   "robot"}),
+    ("studies", {"gridmap", "sim", "robot", "scenarios"}),
+    ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "robot", "scenarios",
+                   "studies", "sim"})])
 def test_each_core_package_imports_only_what_design_md_allows(package, allowed):
     # every import statement, those inside functions too (imported on use)
     graph = import_graph()
@@ -99,7 +107,7 @@ def import_graph() -> dict[str, set[str]]:
 def test_sim_does_not_import_the_robot_software():
     code = (
         "import sys, sim\n"
-        "bad = [m for m in ('updater', 'localization', 'scenarios') if m in sys.modules]\n"
+        "bad = [m for m in ('updater', 'localization', 'robot', 'scenarios') if m in sys.modules]\n"
         "print(','.join(bad))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -107,15 +115,17 @@ def test_sim_does_not_import_the_robot_software():
 
 
 def test_command_line_starts_without_compiling_kernels():
-    code = "import sys, scenarios.cli\nprint('numba' in sys.modules)\n"
+    code = "import sys, mapupdate.main\nprint('numba' in sys.modules)\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
 
-@pytest.mark.parametrize("front_end, module", [("gymnasium", "scenarios/gym/env.py"),
-                                               ("rerun", "scenarios/rerun_log.py")])
-def test_each_optional_front_end_is_imported_by_one_module_only(front_end, module):
+@pytest.mark.parametrize("front_end, modules", [
+    ("gymnasium", ["scenarios/gym/__init__.py", "scenarios/gym/env.py"]),
+    ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["robot/ros1/node.py"]),
+    ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"])])
+def test_each_optional_package_is_imported_in_one_place_only(front_end, modules):
     pattern = re.compile(rf"^\s*(import|from)\s+{front_end}\b", re.M)
     users = sorted(str(p.relative_to(ROOT)) for pkg in PACKAGES
                    for p in (ROOT / pkg).rglob("*.py") if pattern.search(p.read_text()))
-    assert users == [module]
+    assert users == modules

@@ -3,7 +3,7 @@ bag with smooth wheel odometry and a localisation ``map -> odom`` whose poses ji
 0.5 deg (std) at every scan, two objects removed, one moved, two added and three people
 walking. ``mapupdate update`` of the hall's old map, with its defaults, must free the removed
 objects whole, draw the added ones (at least 95 % of the outline cells its scans see often
-enough, one cell of slack as in EVALUATION.md), draw no false occupied cell and free no wall
+enough, one cell of slack as in docs/evaluation.md), draw no false occupied cell and free no wall
 cell, with and without the pose check, and the check must refine the scans, not refuse them.
 
 By default ``update`` smooths a localisation that jitters against the odometry over 2 s
@@ -25,7 +25,7 @@ import pytest
 
 from gridmap import FREE, OCCUPIED, load_map, save_map
 from robotlogs.rosbag import write_bag
-from scenarios.replay import update_from_log
+from robot.replay import LogSource, Outputs, Placement, update_from_log
 
 try:
     import synthetic_hall as hall
@@ -80,8 +80,8 @@ def run(halls, seed: int, check: bool, smooth: float | None) -> dict:
         h = hall_log(halls, seed)
         out = h["dir"] / f"out_{check}_{smooth}.yaml"
         window = {} if smooth is None else {"smooth_window": smooth}
-        s = update_from_log(h["dir"] / "hall.yaml", h["dir"] / "hall.bag", out, progress=False,
-                            pose_check=check, **window)
+        s = update_from_log(h["dir"] / "hall.yaml", LogSource(h["dir"] / "hall.bag"),
+                            Outputs(out), Placement(pose_check=check, **window))
         cells = load_map(out).data
         ref = h["reference"].data
         drawn = grow(cells == OCCUPIED) & h["seen"]

@@ -30,8 +30,8 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, save_map
 from gridmap import load_map
 from gridmap.mapping import build_map
 from robotlogs import log_observations
-from scenarios.logmap import _placed_scans, map_frame
-from scenarios.replay import update_from_log
+from robot.logmap import _placed_scans, map_frame
+from robot.replay import LogSource, Outputs, update_from_log
 
 try:
     from test_intel import figures
@@ -56,8 +56,8 @@ def killian(tmp_path_factory):
     first, last = build_map(frame, placed[:third]), build_map(frame, placed[-third:])
     save_map(first, d / "first.yaml")
     t0 = time.perf_counter()
-    summary = update_from_log(d / "first.yaml", KILLIAN, d / "updated.yaml",
-                              start_time=times[-third], progress=False)
+    summary = update_from_log(d / "first.yaml", LogSource(KILLIAN, start_time=times[-third]),
+                              Outputs(d / "updated.yaml"))
     seconds = time.perf_counter() - t0
     updated = load_map(d / "updated.yaml")
     observed = (first.data != UNKNOWN) & (last.data != UNKNOWN)

@@ -16,9 +16,9 @@ from localization.tracking import TrackingConfig, TrackingMonitor, TrackState
 from robotlogs import LogError, log_observations, read_bag
 from robotlogs.records import OdomRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import write_bag
-from scenarios.cli import main
-from scenarios.pipeline import RobotPipeline
-from scenarios.replay import update_from_log
+from mapupdate import main
+from robot.pipeline import RobotPipeline
+from robot.replay import LogSource, Outputs, Placement, update_from_log
 from updater import MapUpdater
 
 try:
@@ -71,9 +71,9 @@ def test_without_a_start_or_a_localisation_it_localises_over_the_whole_map(room_
     mirror image: a global start cannot tell what the place does not)."""
     d, steps = room_bags
     save_map(room.room([room.ADDED]), d / "as_it_is.yaml")
-    s = update_from_log(d / "as_it_is.yaml", d / "odom.bag", d / "global.yaml",
-                        pose_source="localizer", progress=False, trajectory_path=d / "g.tum",
-                        updater_config=room.NO_GATING, seed=3)
+    s = update_from_log(d / "as_it_is.yaml", LogSource(d / "odom.bag"),
+                        Outputs(d / "global.yaml", trajectory=d / "g.tum"),
+                        Placement(source="localizer", seed=3), updater_config=room.NO_GATING)
     assert s["tracking"]["start"].startswith("started over the whole map")
     assert [e["state"] for e in s["tracking"]["events"]][-1] == "tracking"
     rows = read_tum(d / "g.tum")
@@ -91,8 +91,8 @@ def test_a_global_start_that_never_settles_is_one_clear_line_and_writes_nothing(
                                                             amcl=False)], "ros1")
     with pytest.raises(LogError, match=r"never settled on a pose .* give the start with "
                                        r"--initial-pose X Y YAW"):
-        update_from_log(d / "map.yaml", d / "still.bag", d / "still.yaml",
-                        pose_source="localizer", progress=False)
+        update_from_log(d / "map.yaml", LogSource(d / "still.bag"), Outputs(d / "still.yaml"),
+                        Placement(source="localizer"))
     assert main(["update", "--map", str(d / "map.yaml"), "--log", str(d / "still.bag"),
                  "--out", str(d / "still.yaml"), "--poses", "localizer", "--no-progress"]) == 2
     err = capfd.readouterr().err
@@ -119,8 +119,8 @@ def test_the_trajectory_may_not_overwrite_an_input(room_bags):
     d, _ = room_bags
     for clash in (d / "odom.bag", d / "map.yaml", d / "o.yaml", d / "o.pgm"):
         with pytest.raises(LogError, match="the trajectory would overwrite"):
-            update_from_log(d / "map.yaml", d / "odom.bag", d / "o.yaml", progress=False,
-                            pose_source="localizer", trajectory_path=clash)
+            update_from_log(d / "map.yaml", LogSource(d / "odom.bag"),
+                            Outputs(d / "o.yaml", trajectory=clash), Placement(source="localizer"))
 
 
 # --- bad odometry messages (hostile-input issue) ---------------------------------------------------
@@ -138,11 +138,11 @@ def test_one_nan_odometry_message_is_skipped_counted_and_the_update_goes_on(room
     assert "skipped 1 (not finite /odom); first: " in out and "pose is not finite" in out
     assert load_map(d / f"nan_{source}.yaml").data.shape == room.room([]).data.shape
     with pytest.raises(LogError, match="not finite"):
-        update_from_log(d / "map.yaml", d / "nan.bag", d / "strict.yaml", strict=True,
-                        pose_source=source, progress=False)
+        update_from_log(d / "map.yaml", LogSource(d / "nan.bag", strict=True),
+                        Outputs(d / "strict.yaml"), Placement(source=source))
     with pytest.raises(LogError, match="a start pose is for the localiser"):
-        update_from_log(d / "map.yaml", d / "nan.bag", d / "x.yaml", pose_source="truth",
-                        progress=False, initial_pose=start)
+        update_from_log(d / "map.yaml", LogSource(d / "nan.bag"), Outputs(d / "x.yaml"),
+                        Placement(source="truth", initial_pose=start))
 
 
 # --- the tracking verdict -------------------------------------------------------------------------

@@ -10,8 +10,8 @@ from gridmap import load_map
 from gridmap.mapping import LogOddsMapper
 from robotlogs import LogError
 from robotlogs.rosbag import write_bag
-from scenarios.cli import main
-from scenarios.logmap import map_from_log
+from mapupdate import main
+from robot.logmap import map_from_log
 
 try:
     import test_logs_replay as room

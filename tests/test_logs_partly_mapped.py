@@ -23,7 +23,7 @@ from gridmap import UNKNOWN, load_map, save_map
 from gridmap.mapping import build_map
 from robotlogs.carmen import read_carmen
 from robotlogs.rosbag import write_bag
-from scenarios.replay import update_from_log
+from robot.replay import LogSource, Outputs, update_from_log
 from updater import UpdaterConfig
 
 try:
@@ -74,12 +74,12 @@ def bay(tmp_path_factory):
     before = whole.with_data(cells)
     save_map(before, d / "bay.yaml")
     write_bag(d / "bay.bag", hall.bag_records(steps), "ros1")
-    s = update_from_log(d / "bay.yaml", d / "bay.bag", d / "grown.yaml", progress=False)
+    s = update_from_log(d / "bay.yaml", LogSource(d / "bay.bag"), Outputs(d / "grown.yaml"))
     placed = [(scan, true.compose(hall.MOUNT)) for _, true, _, _, scan in hall.gated(steps)]
     counts = observed(before, placed)
     g = grown(before, load_map(d / "grown.yaml"), whole, counts)
     report("hall with an unknown bay", s, g)
-    plain = update_from_log(d / "bay.yaml", d / "bay.bag", d / "paper.yaml", progress=False,
+    plain = update_from_log(d / "bay.yaml", LogSource(d / "bay.bag"), Outputs(d / "paper.yaml"),
                             updater_config=PAPER)
     g["paper"] = grown(before, load_map(d / "paper.yaml"), whole, counts)
     report("  the same with the updater's own defaults", plain, g["paper"])
@@ -119,8 +119,8 @@ def intel(tmp_path_factory):
     before = build_map(frame, [(r.scan, r.laser_pose) for r in scans[:cut]])
     whole = build_map(frame, [(r.scan, r.laser_pose) for r in scans])
     save_map(before, d / "first40.yaml")
-    s = update_from_log(d / "first40.yaml", INTEL, d / "grown.yaml", progress=False,
-                        start_time=scans[cut].time)
+    s = update_from_log(d / "first40.yaml", LogSource(INTEL, start_time=scans[cut].time),
+                        Outputs(d / "grown.yaml"))
     # the scans the updater's gate lets through (its odometry: the log's odom_* poses)
     later = [(r.time, None, r.odom_pose, r.laser_pose, r.scan) for r in scans[cut:]]
     placed = [(scan, pose) for _, _, _, pose, scan in hall.gated(later)]

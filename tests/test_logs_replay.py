@@ -12,7 +12,7 @@ from gridmap.raycast import cast_rays
 from robotlogs import detect_format
 from robotlogs.records import LogError, OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import write_bag
-from scenarios.replay import update_from_log
+from robot.replay import LogSource, Outputs, Placement, update_from_log
 from updater import MapUpdater, UpdaterConfig
 
 RES = 0.05
@@ -118,8 +118,8 @@ def changed_right(grid: OccupancyGrid) -> tuple[float, float]:
 @pytest.mark.parametrize("bag", ["s.bag", "s2"])
 def test_recorded_tf_replay_equals_in_process_run(world, bag):
     d, steps = world
-    summary = update_from_log(d / "map.yaml", d / bag, d / f"out_{bag}.yaml",
-                              updater_config=NO_GATING, progress=False, smooth_window=0.0)
+    summary = update_from_log(d / "map.yaml", LogSource(d / bag), Outputs(d / f"out_{bag}.yaml"),
+                              Placement(smooth_window=0.0), updater_config=NO_GATING)
     assert summary["pose_source"] == "recorded"
     assert summary["scans"] == summary["scans_used"] == summary["scans_processed"] == len(steps)
     out = load_map(d / f"out_{bag}.yaml")
@@ -133,8 +133,9 @@ def test_recorded_tf_replay_equals_in_process_run(world, bag):
 def test_amcl_pose_without_map_odom_tf(world, tmp_path):
     d, steps = world
     write_bag(tmp_path / "a.bag", bag_records(steps, map_odom_tf=False), "ros1")
-    summary = update_from_log(d / "map.yaml", tmp_path / "a.bag", tmp_path / "out.yaml",
-                              updater_config=NO_GATING, progress=False, smooth_window=0.0)
+    summary = update_from_log(d / "map.yaml", LogSource(tmp_path / "a.bag"),
+                              Outputs(tmp_path / "out.yaml"), Placement(smooth_window=0.0),
+                              updater_config=NO_GATING)
     assert summary["pose_source"] == "recorded" and summary["scans_used"] == len(steps)
     expected = load_map(d / "out_s.bag.yaml") if (d / "out_s.bag.yaml").exists() else \
         in_process(room([REMOVED]), steps, NO_GATING, recorded_sensor)
@@ -165,8 +166,8 @@ def test_amcl_pose_now_and_then_holds_until_the_next_as_amcl_s_tf_would(world, t
     write_bag(tmp_path / "pose.bag", [mount] + only_pose, "ros1")
     out = {}
     for name in ("tf", "pose"):
-        s = update_from_log(d / "map.yaml", tmp_path / f"{name}.bag", tmp_path / f"{name}.yaml",
-                            updater_config=NO_GATING, progress=False)
+        s = update_from_log(d / "map.yaml", LogSource(tmp_path / f"{name}.bag"),
+                            Outputs(tmp_path / f"{name}.yaml"), updater_config=NO_GATING)
         assert s["pose_source"] == "recorded" and s["smoothing"]["scans_smoothed"] == 0
         out[name] = load_map(tmp_path / f"{name}.yaml").data
     assert int((out["tf"] != out["pose"]).sum()) <= 2     # rounding in the composition
@@ -174,15 +175,15 @@ def test_amcl_pose_now_and_then_holds_until_the_next_as_amcl_s_tf_would(world, t
 
 def test_truth_and_localizer_sources(world, tmp_path):
     d, steps = world
-    s = update_from_log(d / "map.yaml", d / "s2", tmp_path / "t.yaml", pose_source="truth",
-                        updater_config=NO_GATING, progress=False)
+    s = update_from_log(d / "map.yaml", LogSource(d / "s2"), Outputs(tmp_path / "t.yaml"),
+                        Placement(source="truth"), updater_config=NO_GATING)
     assert s["pose_source"] == "truth"
     expected = in_process(room([REMOVED]), steps, NO_GATING, lambda t, o: t.compose(MOUNT))
     np.testing.assert_array_equal(load_map(tmp_path / "t.yaml").data, expected.data)
 
-    s = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "l.yaml",
-                        pose_source="localizer", updater_config=NO_GATING, progress=False,
-                        initial_pose=steps[0][1], seed=5)
+    s = update_from_log(d / "map.yaml", LogSource(d / "s.bag"), Outputs(tmp_path / "l.yaml"),
+                        Placement(source="localizer", initial_pose=steps[0][1], seed=5),
+                        updater_config=NO_GATING)
     assert s["pose_source"] == "localizer" and s["localizer_updates"] > 10
     # the route turns 90 deg within a scan at its corners: the filter's heading spread then
     # passes 10 deg for a moment, and those few scans are withheld (not tracking)
@@ -199,12 +200,12 @@ def test_truth_and_localizer_sources(world, tmp_path):
 def test_auto_falls_back_to_the_localizer(world, tmp_path):
     d, steps = world
     write_bag(tmp_path / "o.bag", bag_records(steps, map_odom_tf=False, amcl=False), "ros1")
-    s = update_from_log(d / "map.yaml", tmp_path / "o.bag", tmp_path / "o.yaml",
-                        updater_config=NO_GATING, progress=False, seed=1)
+    s = update_from_log(d / "map.yaml", LogSource(tmp_path / "o.bag"),
+                        Outputs(tmp_path / "o.yaml"), Placement(seed=1), updater_config=NO_GATING)
     assert s["pose_source"] == "localizer"  # started at the first odometry pose
     with pytest.raises(LogError, match="no recorded localisation"):
-        update_from_log(d / "map.yaml", tmp_path / "o.bag", tmp_path / "o2.yaml",
-                        pose_source="recorded", progress=False)
+        update_from_log(d / "map.yaml", LogSource(tmp_path / "o.bag"),
+                        Outputs(tmp_path / "o2.yaml"), Placement(source="recorded"))
 
 
 def test_state_continues_across_recordings(world, tmp_path):
@@ -213,22 +214,24 @@ def test_state_continues_across_recordings(world, tmp_path):
     d, steps = world
     cut = steps[len(steps) // 2][0]
     state = tmp_path / "state.npz"
-    first = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "a.yaml", state,
-                            end_time=cut - 0.1, progress=False, smooth_window=0.0)
+    first = update_from_log(d / "map.yaml", LogSource(d / "s.bag", end_time=cut - 0.1),
+                            Outputs(tmp_path / "a.yaml", state=state),
+                            Placement(smooth_window=0.0))
     assert not first["state_loaded"] and state.exists()
-    second = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "b.yaml", state,
-                             start_time=cut, progress=False, smooth_window=0.0)
+    second = update_from_log(d / "map.yaml", LogSource(d / "s.bag", start_time=cut),
+                             Outputs(tmp_path / "b.yaml", state=state),
+                             Placement(smooth_window=0.0))
     assert second["state_loaded"]
-    whole = update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "w.yaml", progress=False,
-                            smooth_window=0.0)
+    whole = update_from_log(d / "map.yaml", LogSource(d / "s.bag"), Outputs(tmp_path / "w.yaml"),
+                            Placement(smooth_window=0.0))
     assert first["scans_used"] + second["scans_used"] == whole["scans_used"]
     np.testing.assert_array_equal(load_map(tmp_path / "b.yaml").data,
                                   load_map(tmp_path / "w.yaml").data)
     other = room([REMOVED])
     save_map(OccupancyGrid(other.data[:, :-4], RES, other.origin), tmp_path / "small.yaml")
     with pytest.raises(LogError, match="state belongs to a map of shape"):
-        update_from_log(tmp_path / "small.yaml", d / "s.bag", tmp_path / "c.yaml", state,
-                        progress=False)
+        update_from_log(tmp_path / "small.yaml", LogSource(d / "s.bag"),
+                        Outputs(tmp_path / "c.yaml", state=state))
 
 
 def test_carmen_log_replay(world, tmp_path):
@@ -245,9 +248,8 @@ def test_carmen_log_replay(world, tmp_path):
     log = tmp_path / "room.log"
     log.write_text("# a CARMEN log\n" + "\n".join(lines) + "\nNEFF 3\n")
     assert detect_format(log) == "carmen"
-    s = update_from_log(tmp_path.parent / world[0].name / "map.yaml" if False else
-                        world[0] / "map.yaml", log, tmp_path / "c.yaml",
-                        updater_config=NO_GATING, progress=False)
+    s = update_from_log(world[0] / "map.yaml", LogSource(log), Outputs(tmp_path / "c.yaml"),
+                        updater_config=NO_GATING)
     assert s["pose_source"] == "recorded" and s["scans_used"] == len(steps)
     from robotlogs.carmen import read_carmen
 
@@ -276,8 +278,8 @@ def test_carmen_corrected_poses_beside_raw_odometry_are_the_map_frame_poses(worl
         truth[round(t, 3)] = sensor
     log = tmp_path / "corrected.log"
     log.write_text("\n".join(lines) + "\n")
-    s = update_from_log(world[0] / "map.yaml", log, tmp_path / "c.yaml", progress=False,
-                        trajectory_path=tmp_path / "c.tum")
+    s = update_from_log(world[0] / "map.yaml", LogSource(log),
+                        Outputs(tmp_path / "c.yaml", trajectory=tmp_path / "c.tum"))
     assert s["pose_source"] == "recorded" and s["smoothing"]["scans_smoothed"] > 30
     rows = np.loadtxt(tmp_path / "c.tum")
     errors = [math.hypot(x - truth[round(t, 3)].x, y - truth[round(t, 3)].y)
@@ -304,17 +306,19 @@ def test_detect_format(world, tmp_path):
 def test_user_errors_name_the_problem(world, tmp_path):
     d, steps = world
     with pytest.raises(LogError, match=r"no LaserScan topic '/front'.*the bag has .*/scan"):
-        update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "x.yaml", scan_topics=["/front"],
-                        progress=False)
+        update_from_log(d / "map.yaml", LogSource(d / "s.bag", scan_topics=["/front"]),
+                        Outputs(tmp_path / "x.yaml"))
     write_bag(tmp_path / "m.bag", bag_records(steps[:3], mount_tf=False), "ros1")
     with pytest.raises(LogError, match=r"no transform from 'base_link' to the scan frame "
                                        r"'laser'.*laser_mount"):
-        update_from_log(d / "map.yaml", tmp_path / "m.bag", tmp_path / "x.yaml", progress=False)
-    s = update_from_log(d / "map.yaml", tmp_path / "m.bag", tmp_path / "x.yaml",
-                        laser_mount=MOUNT, progress=False)
+        update_from_log(d / "map.yaml", LogSource(tmp_path / "m.bag"),
+                        Outputs(tmp_path / "x.yaml"))
+    s = update_from_log(d / "map.yaml", LogSource(tmp_path / "m.bag", laser_mount=MOUNT),
+                        Outputs(tmp_path / "x.yaml"))
     assert s["scans_used"] == 3
     with pytest.raises(LogError, match="pose_source must be one of"):
-        update_from_log(d / "map.yaml", d / "s.bag", tmp_path / "x.yaml", pose_source="gps")
+        update_from_log(d / "map.yaml", LogSource(d / "s.bag"), Outputs(tmp_path / "x.yaml"),
+                        Placement(source="gps"))
 
 
 def test_two_lidars_each_with_its_own_mount(world, tmp_path):
@@ -334,8 +338,8 @@ def test_two_lidars_each_with_its_own_mount(world, tmp_path):
                  ScanRecord(t, scan, topic="/front/scan"),
                  ScanRecord(t, back, frame_id="rear_laser", topic="/rear/scan")]
     write_bag(tmp_path / "two", recs, "ros2")
-    s = update_from_log(d / "map.yaml", tmp_path / "two", tmp_path / "two.yaml",
-                        updater_config=NO_GATING, progress=False)
+    s = update_from_log(d / "map.yaml", LogSource(tmp_path / "two"),
+                        Outputs(tmp_path / "two.yaml"), updater_config=NO_GATING)
     assert s["scans_used"] == 2 * len(steps) and s["scans_dropped_as_lost"] == 0
     out = load_map(tmp_path / "two.yaml")
     freed, added = changed_right(out)
@@ -369,9 +373,10 @@ def test_pose_check_keeps_walls_when_the_recorded_poses_are_off(world, tmp_path)
 
     def freed_walls(log, check):
         out = tmp_path / f"{log.stem}-{check}.yaml"
-        s = update_from_log(world[0] / "map.yaml", log, out, updater_config=NO_GATING,
-                            progress=False, pose_check=check,
-                            pose_check_config=PoseCheckConfig(slack_cells=1))
+        s = update_from_log(world[0] / "map.yaml", LogSource(log), Outputs(out),
+                            Placement(pose_check=check,
+                                      pose_check_config=PoseCheckConfig(slack_cells=1)),
+                            updater_config=NO_GATING)
         return s, int((walls & (load_map(out).data == FREE)).sum())
 
     off = log_with(Pose2D(0.2, 0.0, math.radians(2.0)), "off.log")
@@ -412,10 +417,10 @@ def test_carmen_scans_with_nan_negative_or_huge_readings_are_all_used(world, tmp
 
     for name, change in (("bad", spoil), ("blank", blank)):
         (tmp_path / f"{name}.log").write_text("\n".join(_carmen_lines(steps, change)) + "\n")
-    s = update_from_log(world[0] / "map.yaml", tmp_path / "bad.log", tmp_path / "bad.yaml",
-                        updater_config=NO_GATING, progress=False)
-    update_from_log(world[0] / "map.yaml", tmp_path / "blank.log", tmp_path / "blank.yaml",
-                    updater_config=NO_GATING, progress=False)
+    s = update_from_log(world[0] / "map.yaml", LogSource(tmp_path / "bad.log"),
+                        Outputs(tmp_path / "bad.yaml"), updater_config=NO_GATING)
+    update_from_log(world[0] / "map.yaml", LogSource(tmp_path / "blank.log"),
+                    Outputs(tmp_path / "blank.yaml"), updater_config=NO_GATING)
     assert s["scans"] == s["scans_used"] == len(steps) and s["read"]["skipped"] == {}
     assert s["read_lines"] == [f"kept {len(steps)} scans with {2 * len(steps)} invalid ranges "
                                "(NaN or negative) as invalid beams"]
@@ -426,7 +431,7 @@ def test_carmen_scans_with_nan_negative_or_huge_readings_are_all_used(world, tmp
 def test_skipped_lines_are_reported_per_kind_and_strict_refuses_them(world, tmp_path, capfd):
     """112 scan lines, 56 of them cut short and 1 of an unknown kind: the summary says so, one
     line per kind, and --strict refuses the log before writing anything."""
-    from scenarios.cli import main
+    from mapupdate import main
 
     _, steps = world
     lines = _carmen_lines((steps * 2)[:112])

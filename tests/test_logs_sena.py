@@ -19,7 +19,7 @@ import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, load_map
 from robotlogs.carmen import read_carmen
-from scenarios.cli import main
+from mapupdate import main
 
 DATA = Path(__file__).resolve().parents[2] / "shared/data"
 ODOM, KEYFRAMES = DATA / "sena.odom.log", DATA / "sena.keyframes.log"

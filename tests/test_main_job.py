@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gridmap import load_map
-from scenarios.cli import main
+from mapupdate import main
 
 SESSION_KEYS = {"name", "map_metrics", "change_detection", "ghost_cells", "localization",
                 "resources"}

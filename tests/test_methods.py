@@ -1,4 +1,4 @@
-"""The methods behind the updater's interface (scenarios.methods), each driven through the one
+"""The methods behind the updater's interface (robot.methods), each driven through the one
 robot pipeline in a synthetic room: a box the map has is gone from the world, a box the world
 has is missing from the map, and a mapped annex lies outside what the robot can see."""
 
@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gridmap import FREE, MapUpdatingError, OCCUPIED, UNKNOWN
-from scenarios.methods import METHODS, MethodError, check_method, make_method
-from scenarios.pipeline import RobotPipeline
-from updater import MapUpdater
+from gridmap import FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid
+from robot.methods import METHODS, MethodError, check_method, make_method
+from robot.pipeline import RobotPipeline
+from updater import MapMethod, MapUpdater
 
 try:
     import synthetic_room as world
@@ -98,7 +98,7 @@ def test_fuse_draws_an_added_box_and_frees_a_removed_one(maps):
 
 
 def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys):
-    from scenarios.cli import main
+    from mapupdate import main
 
     out = tmp_path / "run"
     assert main(["run", "--method", "remapp", "--out", str(out), "--no-progress"]) == 2
@@ -111,12 +111,13 @@ def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys)
 def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path):
     gymnasium = pytest.importorskip("gymnasium")
     from scenarios.generator import write_generated
-    from scenarios.methods import KeepMap
+    from robot.methods import KeepMap
 
     path = str(write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2))
     with pytest.raises(MethodError, match="did you mean 'fuse'"):
-        gymnasium.make("WarehouseMapUpdate-v0", scenario=path, method="fusee")
-    env = gymnasium.make("WarehouseMapUpdate-v0", scenario=path, quick=True, method="none")
+        gymnasium.make("scenarios.gym:WarehouseMapUpdate-v0", scenario=path, method="fusee")
+    env = gymnasium.make("scenarios.gym:WarehouseMapUpdate-v0", scenario=path, quick=True,
+                         method="none")
     env.reset(seed=1)
     for _ in range(60):
         *_, info = env.step([0.4, 0.0])
@@ -164,7 +165,7 @@ def _drive(method, reference_map, shapes, seed=1, seconds=40.0):
 def test_hybrid_differs_from_the_paper_only_near_what_the_paper_detected(maps):
     """Where the hybrid's map differs from the paper's, a detected change's hit or a cell the
     paper changed lies within HYBRID_RADIUS; and it changes no cell M has unknown."""
-    from scenarios.methods import HYBRID_RADIUS
+    from robot.methods import HYBRID_RADIUS
 
     ref = reference().data
     shapes = world.room_walls() + [ADDED]
@@ -228,7 +229,15 @@ def test_hybrid_maps_asked_for_at_every_scan_end_as_one_asked_for_at_the_end(map
 
 @pytest.mark.parametrize("radius", [0.0, -0.1, float("nan"), 6.0, True])
 def test_hybrid_refuses_a_radius_out_of_range(radius):
-    from scenarios.methods import HybridMethod
+    from robot.methods import HybridMethod
 
     with pytest.raises(MethodError, match=r"hybrid: radius must be a number in \(0, 5\] m"):
         HybridMethod(reference(), None, radius=radius)
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_every_method_implements_the_updater_packages_interface(name):
+    grid = OccupancyGrid.empty(20, 10, 0.05)
+    method = make_method(name, grid)
+    assert isinstance(method, MapMethod)
+    assert method.updated_map().shape == grid.shape and method.state_bytes() > 0

@@ -13,7 +13,7 @@ import pytest
 from gridmap import FREE, OCCUPIED, Pose2D, PoseVerdict
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck
-from scenarios.pipeline import RobotPipeline
+from robot.pipeline import RobotPipeline
 from updater import MapUpdater, ScanStatus
 
 try:
@@ -139,9 +139,38 @@ def _steps(path: pathlib.Path) -> list[str]:
 
 
 def test_only_the_pipeline_steps_the_localiser_and_the_updater():
-    """Front ends (the session, the log replay, the gym env) go through the pipeline: nothing
-    else in ``scenarios`` calls ``MapUpdater.process`` or ``MonteCarloLocalizer.update``."""
-    inside = _steps(ROOT / "scenarios" / "pipeline.py")
-    elsewhere = [c for p in sorted((ROOT / "scenarios").rglob("*.py"))
+    """Front ends (the session, the log replay, the ROS node, the gym env) go through the
+    pipeline: nothing else calls ``MapUpdater.process`` or ``MonteCarloLocalizer.update``."""
+    inside = _steps(ROOT / "robot" / "pipeline.py")
+    elsewhere = [c for pkg in ("robot", "scenarios", "studies", "mapupdate")
+                 for p in sorted((ROOT / pkg).rglob("*.py"))
                  if p.name != "pipeline.py" for c in _steps(p)]
     assert len(inside) == 2 and elsewhere == []
+
+
+class Shift:
+    """A pose check that refines every sensor pose 3 cm to the left, or refuses every scan."""
+
+    def __init__(self, refuse=False):
+        self.refuse = refuse
+
+    def verdict(self, scan, robot, mount, cov):
+        if self.refuse:
+            return PoseVerdict.refused("test")
+        sensor = robot.compose(mount)
+        return PoseVerdict.refined(Pose2D(sensor.x, sensor.y + 0.03, sensor.theta))
+
+
+def test_the_report_carries_the_sensor_pose_the_scan_was_placed_at():
+    _, ref = scene()
+    (robot, scan), *_ = drive(1)
+    plain = RobotPipeline(MapUpdater(ref)).step(scan, MOUNT, odometry=robot, pose=robot)
+    assert plain.report.sensor_pose == robot.compose(MOUNT)
+    refined = RobotPipeline(MapUpdater(ref), pose_check=Shift()).step(scan, MOUNT,
+                                                                      odometry=robot, pose=robot)
+    expected = robot.compose(MOUNT)
+    assert refined.report.status is ScanStatus.PROCESSED
+    assert refined.report.sensor_pose == Pose2D(expected.x, expected.y + 0.03, expected.theta)
+    refused = RobotPipeline(MapUpdater(ref), pose_check=Shift(refuse=True)).step(
+        scan, MOUNT, odometry=robot, pose=robot)
+    assert refused.report.status is ScanStatus.REFUSED and refused.report.sensor_pose is None

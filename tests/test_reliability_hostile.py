@@ -21,7 +21,7 @@ import yaml
 from PIL import Image
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, load_map, save_map
-from scenarios.cli import main
+from mapupdate import main
 from tiny_room import tiny_room_dict
 
 LIMIT_S = 60       # no case may run longer: a hang is a failure, not a wait

@@ -22,7 +22,8 @@ from localization import MonteCarloLocalizer
 from localization.confidence import PoseCheck
 from robotlogs.carmen import parse_carmen
 from robotlogs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
-from scenarios.replay import summary_lines, update_from_log
+from mapupdate.summaries import update_lines as summary_lines
+from robot.replay import LogSource, Outputs, update_from_log
 from robotlogs.rosbag import BagWriter, read_bag, write_bag
 from updater import MapUpdater, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK
@@ -257,8 +258,8 @@ def test_replay_with_every_pose_off_the_map_skips_and_keeps_the_map(tmp_path):
         r = " ".join(["3.0"] * 180)
         lines.append(f"FLASER 180 {r} 90.0 90.0 0.0 90.0 90.0 0.0 {k * 0.5:.1f} h 0")
     (tmp_path / "far.log").write_text("\n".join(lines) + "\n")
-    s = update_from_log(tmp_path / "m.yaml", tmp_path / "far.log", tmp_path / "out.yaml",
-                        progress=False)
+    s = update_from_log(tmp_path / "m.yaml", LogSource(tmp_path / "far.log"),
+                        Outputs(tmp_path / "out.yaml"))
     assert s["scans_used"] == 20 and s["scans_processed"] == 0
     assert s["cells_freed"] == s["cells_occupied"] == 0
     assert (load_map(tmp_path / "out.yaml").data == ref.data).all()
@@ -313,8 +314,8 @@ def test_carmen_lines_out_of_time_order_replay_as_if_sorted(tmp_path):
     maps = []
     for name, content in (("sorted", lines), ("shuffled", shuffled + lines[:3])):
         (tmp_path / f"{name}.log").write_text("\n".join(content) + "\n")
-        s = update_from_log(tmp_path / "m.yaml", tmp_path / f"{name}.log",
-                            tmp_path / f"{name}.yaml", progress=False)
+        s = update_from_log(tmp_path / "m.yaml", LogSource(tmp_path / f"{name}.log"),
+                            Outputs(tmp_path / f"{name}.yaml"))
         maps.append((load_map(tmp_path / f"{name}.yaml").data, s))
     (a, sa), (b, sb) = maps
     # the repeated lines are gated (same time), so the maps agree cell for cell
@@ -350,8 +351,9 @@ def test_bag_with_header_stamps_going_back_replays_and_says_so(tmp_path, monkeyp
     monkeypatch.undo()
     scans = [r.time for r in read_bag(tmp_path / "b.bag", kinds=("scan",))]
     assert scans[5:7] == [3.5, 1.0]
-    s = update_from_log(tmp_path / "m.yaml", tmp_path / "b.bag", tmp_path / "out.yaml",
-                        progress=False, updater_config=UpdaterConfig(grow_into_unknown=True))
+    s = update_from_log(tmp_path / "m.yaml", LogSource(tmp_path / "b.bag"),
+                        Outputs(tmp_path / "out.yaml"),
+                        updater_config=UpdaterConfig(grow_into_unknown=True))
     assert s["scans"] == s["scans_used"] == s["scans_processed"] == 12
     assert s["cells_freed"] == s["cells_occupied"] == 0
     assert s["timestamps"] == {"scans": 12, "same_as_before": 0, "earlier_than_before": 1,

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from gridmap import load_map, map_io
-from scenarios import cli
+import mapupdate as cli
 from scenarios.checkpoint import ResumeError
 from scenarios.runner import RunOptions, run_scenario
 
@@ -92,7 +92,7 @@ def test_killed_while_writing_a_map_keeps_the_last_session_and_resumes_exactly(
 
 
 def test_killed_by_a_signal_mid_session_resumes_from_the_command_line(tmp_path, uninterrupted):
-    cmd = [sys.executable, "-m", "scenarios", "run", "--quick", "--sessions", str(SESSIONS),
+    cmd = [sys.executable, "-m", "mapupdate", "run", "--quick", "--sessions", str(SESSIONS),
            "--out", str(tmp_path), "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
@@ -105,7 +105,7 @@ def test_killed_by_a_signal_mid_session_resumes_from_the_command_line(tmp_path, 
     done = finished(tmp_path)
     assert done in (["W1", "W2"], ["W1", "W2", "W3"])
 
-    resumed = subprocess.run([sys.executable, "-m", "scenarios", "run", "--resume",
+    resumed = subprocess.run([sys.executable, "-m", "mapupdate", "run", "--resume",
                               str(tmp_path), "--no-progress"], capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
     assert finished(tmp_path) == ["W1", "W2", "W3"]     # the run's own --sessions 3

@@ -7,7 +7,7 @@ from collections import Counter
 import pytest
 from rerun.chunk import RrdReader
 
-from scenarios.cli import main
+from mapupdate import main
 from scenarios.rerun_log import ENTITIES, RerunRecorder
 from scenarios.runner import RunOptions, run_scenario
 from tiny_room import write_tiny_room

@@ -7,11 +7,12 @@ import json
 import pytest
 import yaml
 
+import mapupdate.testbed_commands
 import scenarios.runner
 from localization import LocalizerConfig
 from localization.confidence import PoseCheckConfig
-from scenarios.cli import main
-from scenarios.robot_config import ConfigError, RobotConfig, load_robot_config
+from mapupdate import main
+from robot.robot_config import ConfigError, RobotConfig, load_robot_config
 from tiny_room import tiny_room, write_tiny_room
 from updater import UpdaterConfig
 
@@ -133,24 +134,25 @@ def test_update_refuses_a_misspelt_file_before_reading_the_log(tmp_path, capsys,
 
 
 def test_update_hands_the_sections_to_the_replay(tmp_path, monkeypatch):
-    import scenarios.replay
+    import robot.replay
 
     seen = {}
 
-    def fake_update(map_path, log_path, out_path, state_path, **kw):
-        seen.update(kw)
+    def fake_update(map_path, log, outputs, placement, **kw):
+        seen.update(kw, placement=placement)
         return {"scans_processed": 0, "scans": 0, "scans_dropped_as_lost": 0,
                 "scans_refused_by_pose_check": 0, "cells_freed": 0, "cells_occupied": 0,
                 "pose_source": "recorded"}
 
-    monkeypatch.setattr(scenarios.replay, "update_from_log", fake_update)
+    monkeypatch.setattr(robot.replay, "update_from_log", fake_update)
     cfg = write_yaml(tmp_path / "cfg.yaml", VALID)
     assert main(["update", "--map", "m.yaml", "--log", "l.log", "--out", "o.yaml", "--config",
                  str(cfg), "--pose-check", "--no-progress"]) == 0
     assert seen["updater_config"] == UpdaterConfig(threshold=9)
-    assert seen["localizer_config"].max_particles == 900
-    assert seen["pose_check_config"] == PoseCheckConfig(slack_cells=1, max_gain=0.02)
-    assert seen["pose_check"] is True
+    placement = seen["placement"]
+    assert placement.localizer_config.max_particles == 900
+    assert placement.pose_check_config == PoseCheckConfig(slack_cells=1, max_gain=0.02)
+    assert placement.pose_check is True
 
 
 @pytest.mark.parametrize("flag, on", [([], True), (["--pose-check"], True),
@@ -159,7 +161,7 @@ def test_run_keeps_the_pose_check_switch_beside_the_file(tmp_path, monkeypatch, 
     from types import SimpleNamespace
 
     seen = []
-    monkeypatch.setattr(scenarios.runner, "run_scenario", lambda scenario, opts: (
+    monkeypatch.setattr(mapupdate.testbed_commands, "run_scenario", lambda scenario, opts: (
         seen.append(opts), SimpleNamespace(out_dir=tmp_path))[1])
     cfg = write_yaml(tmp_path / "cfg.yaml", {"pose_check": {"slack_cells": 1}})
     assert main(["run", "--config", str(cfg), "--no-progress", *flag]) == 0

@@ -6,13 +6,14 @@ as root; elsewhere these tests skip with the reason."""
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
 import pytest
 
 from gridmap import load_map
-from scenarios.cli import main
+from mapupdate import main
 
 import ros1_tools
 
@@ -231,8 +232,42 @@ def test_malformed_traffic_is_counted_and_skipped_never_a_crash(ros, tmp_path):
     ros.stop(node)
 
 
+NODE_WATCHING_ITS_MODULES = """
+import json, os, sys, threading, time
+FORBIDDEN = ("sim", "scenarios", "studies", "pymunk", "gymnasium", "rerun", "matplotlib", "ray")
+
+def watch(path):
+    while True:
+        loaded = sorted(m for m in FORBIDDEN if m in sys.modules)
+        with open(path + ".tmp", "w") as f:
+            json.dump({"loaded": loaded, "numba": "numba" in sys.modules}, f)
+        os.replace(path + ".tmp", path)
+        time.sleep(0.2)
+
+threading.Thread(target=watch, args=(sys.argv[1],), daemon=True).start()
+from mapupdate import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_the_running_node_loads_no_simulator_testbed_or_front_end(ros, bags, tmp_path):
+    watch = tmp_path / "modules.json"
+    p = ros.start([ros1_tools.sys.executable, "-c", NODE_WATCHING_ITS_MODULES, str(watch),
+                   "ros1", "--map", str(bags / "run/maps/M_W1.yaml"), "__name:=lean",
+                   f"_save_path:={tmp_path / 'lean.yaml'}"], "lean")
+    ros.wait(lambda: ros.has_service("/lean/save") or p.poll() is not None, 60, "the node")
+    ros.play(bags / "bags/W2.bag", rate=5.0)
+    assert "success: True" in ros.call("/lean/save")
+    time.sleep(0.5)
+    seen = json.loads(watch.read_text())
+    assert seen["numba"] and seen["loaded"] == []      # it worked, on the robot software alone
+    assert (load_map(tmp_path / "lean.yaml").data
+            != load_map(bags / "run/maps/M_W1.yaml").data).sum() > 100
+    ros.stop(p)
+
+
 def test_a_misspelt_parameter_is_refused_at_start_with_the_nearest_name(ros, bags):
-    p = ros.start([ros1_tools.sys.executable, "-m", "scenarios", "ros1", "--map",
+    p = ros.start([ros1_tools.sys.executable, "-m", "mapupdate", "ros1", "--map",
                    str(bags / "run/maps/M_W1.yaml"), "__name:=typo", "_updater/treshold:=5"],
                   "typo")
     assert p.wait(60) != 0
@@ -253,3 +288,15 @@ def test_the_launch_file_starts_the_node(ros, bags, tmp_path):
     assert load_map(tmp_path / "launched.yaml").shape == load_map(
         bags / "run/maps/M_W1.yaml").shape
     ros.stop(launch)
+
+
+def test_without_a_ros_master_the_node_says_so_in_one_line(bags, tmp_path):
+    env = {**ros1_tools.os.environ, "ROS_HOME": str(tmp_path),
+           "ROS_MASTER_URI": f"http://127.0.0.1:{ros1_tools.free_port()}"}
+    p = ros1_tools.subprocess.run(
+        [ros1_tools.sys.executable, "-m", "mapupdate", "ros1", "--map",
+         str(bags / "run/maps/M_W1.yaml")], env=env, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2
+    assert p.stderr.splitlines() == [f"mapupdate ros1: error: no ROS master answers at "
+                                     f"{env['ROS_MASTER_URI']}: start one (roscore) or set "
+                                     "ROS_MASTER_URI"]

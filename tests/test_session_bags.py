@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from gridmap import load_map
-from scenarios.cli import main
-from scenarios.replay import update_from_log
+from mapupdate import main
+from robot.replay import LogSource, Outputs, Placement, update_from_log
 from robotlogs.rosbag import bag_topics
 from scenarios.session_bags import SessionBagRecorder
 from scenarios.observers import Observers
@@ -41,8 +41,8 @@ def test_replay_of_recorded_localisation_gives_the_in_process_map(bag_run, fmt, 
     # the run asked the pose check (the runner's default), so the replay asks it too; the
     # run's updater has the class's defaults, not update's (which grow the map); and the
     # localiser's map -> odom moves only at its filter updates, so update smooths nothing
-    summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", bag, out, progress=False,
-                              pose_check=True, updater_config=UpdaterConfig())
+    summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", LogSource(bag), Outputs(out),
+                              Placement(pose_check=True), updater_config=UpdaterConfig())
     assert summary["pose_source"] == "recorded" and summary["scans_refused_by_pose_check"] > 0
     assert summary["smoothing"] == {"window_s": 2.0, "scans_smoothed": 0, "restarts": 0}
     in_process = load_map(root / "run" / "maps" / "M_W2.yaml")

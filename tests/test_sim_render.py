@@ -6,7 +6,7 @@ import numpy as np
 from PIL import Image
 
 import sim
-from scenarios.cli import main
+from mapupdate import main
 
 WAREHOUSE = Path(__file__).resolve().parents[1] / "scenarios" / "aws_small_warehouse.yaml"
 

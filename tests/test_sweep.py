@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.cli import main
+from mapupdate import main
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMING = ("wall_s", "updater_cpu_s")       # the only columns that differ between two runs
@@ -131,7 +131,7 @@ def test_a_sweep_killed_part_way_resumes_without_redoing_a_finished_run(tmp_path
                            "\nseeds: [1, 2, 3, 4, 5]\nmethods: [none]\nquick: true\n")
     out = tmp_path / "killed"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "scenarios", "sweep", str(spec), "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "mapupdate", "sweep", str(spec), "--out",
                              str(out), "--workers", "2", "--no-progress"], cwd=ROOT, env=env,
                             start_new_session=True, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -170,14 +170,3 @@ def test_grid_points_become_columns_and_rows_of_the_summary(tmp_path):
     summary = (out / "summary.md").read_text()
     assert "| method | updater.threshold | runs |" in summary
     assert "| paper | 6 | 1 |" in summary and "| paper | 8 | 1 |" in summary
-
-
-def test_ray_is_imported_by_one_module_only():
-    import re
-
-    pattern = re.compile(r"^\s*(import|from)\s+ray\b", re.M)
-    users = sorted(str(p.relative_to(ROOT)) for pkg in ("gridmap", "sim", "updater",
-                                                        "localization", "evaluation",
-                                                        "robotlogs", "scenarios")
-                   for p in (ROOT / pkg).rglob("*.py") if pattern.search(p.read_text()))
-    assert users == ["scenarios/sweep_ray.py"]

@@ -14,10 +14,11 @@ import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, Pose2D, load_map, save_map
 from robotlogs.carmen import read_carmen
-from scenarios.cli import main
-from scenarios.methods import make_method
-from scenarios.replay import ScanClock, summary_lines, update_from_log
-from scenarios.robot_config import ROBOT_UPDATER_DEFAULTS
+from mapupdate import main
+from robot.methods import make_method
+from mapupdate.summaries import update_lines as summary_lines
+from robot.replay import LogSource, Outputs, ScanClock, update_from_log
+from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import ScanStatus, UpdaterConfig
 
 try:
@@ -95,7 +96,7 @@ def test_cells_changed_are_counted_by_kind_as_the_two_maps_differ(room, capsys):
                         f"{n['unknown_to_free'] + n['unknown_to_occupied']} unknown cells now "
                         f"known ({n['unknown_to_free']} free, {n['unknown_to_occupied']} "
                         "occupied); method paper, poses recorded")
-    s = update_from_log(room / "map.yaml", log, room / "again.yaml", progress=False)
+    s = update_from_log(room / "map.yaml", LogSource(log), Outputs(room / "again.yaml"))
     assert {k: s[k] for k in kinds} == n and s["known_to_unknown"] == 0
     assert s["cells_freed"] == n["occupied_to_free"] + n["unknown_to_free"]
     assert s["cells_occupied"] == n["free_to_occupied"] + n["unknown_to_occupied"]
@@ -192,12 +193,12 @@ def test_a_log_whose_stamps_are_all_equal_is_replayed_from_scan_order_and_says_s
     # never sees time pass, so it lets the first scan through and no other
     _, reports = in_process("paper", equal, UpdaterConfig(grow_into_unknown=True))
     assert sum(r.processed for r in reports) == 1
-    s = update_from_log(room / "map.yaml", equal, room / "equal.yaml", progress=False)
+    s = update_from_log(room / "map.yaml", LogSource(equal), Outputs(room / "equal.yaml"))
     assert s["timestamps"] == {"scans": 400, "same_as_before": 399, "earlier_than_before": 0,
                                "period_s": 1.0, "period_measured": False}
     # ... now timed 1 s apart: as the same log with stamps 1 s apart, scan for scan
     spaced = carmen_log(room / "spaced.log", poses, [float(k) for k in range(len(poses))])
-    t = update_from_log(room / "map.yaml", spaced, room / "spaced.yaml", progress=False)
+    t = update_from_log(room / "map.yaml", LogSource(spaced), Outputs(room / "spaced.yaml"))
     assert t["timestamps"]["same_as_before"] == t["timestamps"]["earlier_than_before"] == 0
     assert s["scans_processed"] == t["scans_processed"] > 30
     np.testing.assert_array_equal(load_map(room / "equal.yaml").data,
@@ -230,7 +231,7 @@ def test_when_no_cell_changed_the_summary_says_why(room, capsys):
     assert set(rules) == {"no motion", "fast turn"} and rules["fast turn"] == 10
     flagged = int((upd.change_counts() > 0).sum())           # cells with a changed flag
     assert flagged > 20
-    s = update_from_log(room / "map.yaml", log, room / "again.yaml", progress=False)
+    s = update_from_log(room / "map.yaml", LogSource(log), Outputs(room / "again.yaml"))
     assert s["evidence"] == {"pending_cells": flagged, "pending_few_observations": flagged,
                              "pending_outvoted": 0, "threshold": 7}
     listed = ", ".join(f"{rule} {k}" for rule, k in sorted(rules.items(),
@@ -261,7 +262,7 @@ def test_without_the_unanimous_rule_the_pending_cells_are_counted_not_split(room
     gives the cells whose evidence stayed below the threshold without saying why."""
     start = Pose2D(3.5, 5.5, 0.0)
     log = carmen_log(room / "still2.log", [start] * 10, [0.1 * k for k in range(10)])
-    s = update_from_log(room / "map.yaml", log, room / "still2.yaml", progress=False,
+    s = update_from_log(room / "map.yaml", LogSource(log), Outputs(room / "still2.yaml"),
                         updater_config=UpdaterConfig(grow_into_unknown=True))
     e = s["evidence"]
     assert e["pending_cells"] > 20 and e["pending_few_observations"] is None

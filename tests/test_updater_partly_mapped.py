@@ -1,6 +1,6 @@
 """A partly mapped place: beams that look into unknown space are changes only because the map
 does not know what is there, and they say nothing about the pose; the lost check leaves them
-out (ALGORITHM.md, "Lost check")."""
+out (docs/algorithm.md, "Lost check")."""
 
 import numpy as np
 

@@ -12,13 +12,16 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from gridmap import OccupancyGrid, Pose2D
+import sim
+from gridmap import OccupancyGrid, Pose2D, load_map
 from gridmap.map_io import trinary_image
+from robot.methods import check_method
+from robot.robot_config import ConfigError, load_robot_config
 
-from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
+from ..catalog import find_scenario
 from ..session import UpdateSession, session_seeds
-
-ENV_ID = "WarehouseMapUpdate-v0"
+from ..topview import scan_points, top_view
+from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
 
 
 class WarehouseMapUpdateEnv(gym.Env):
@@ -144,11 +147,6 @@ class WarehouseMapUpdateEnv(gym.Env):
                  updater_config=None, localizer_config=None, pose_check: bool = True,
                  config=None, render_mode: str | None = None, render_scale: int = 2,
                  method: str = "paper"):
-        import sim
-
-        from ..methods import check_method
-        from ..robot_config import load_robot_config
-
         _check_arguments(control_period=control_period, map_seed=map_seed,
                          render_mode=render_mode, render_modes=self.metadata["render_modes"],
                          render_scale=render_scale, lost_distance=lost_distance,
@@ -206,15 +204,11 @@ class WarehouseMapUpdateEnv(gym.Env):
         obs["odometry"] = pose
         obs["estimate"] = pose
         if self._map_observation:
-            import sim
-
             obs["map"] = spaces.Box(0, 255, sim.grid_frame(self.scenario).shape, np.uint8)
         return action, spaces.Dict(obs)
 
     # --- the gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        import sim
-
         super().reset(seed=seed)
         if options:
             raise ValueError(f"reset() takes no options, got {sorted(options)}")
@@ -239,8 +233,6 @@ class WarehouseMapUpdateEnv(gym.Env):
         return self._observation(), self._info(0)
 
     def step(self, action):
-        import sim
-
         if self._done:
             raise RuntimeError("the episode has ended (or never started): call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(2)   # float64: commands kept exact
@@ -281,7 +273,6 @@ class WarehouseMapUpdateEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from ..topview import scan_points, top_view
 
         session, world = self.session, self.world
         if session is None:
@@ -384,18 +375,12 @@ def _check_render_size(scale: int, grid: OccupancyGrid) -> None:
 
 def _given_once(section: str, argument, from_config):
     if argument is not None and from_config is not None:
-        from ..robot_config import ConfigError
-
         raise ConfigError(f"the {section} configuration is given twice: as {section}_config= "
                           f"and as config['{section}']")
     return from_config if argument is None else argument
 
 
 def _load_scenario(scenario, quick: bool):
-    import sim
-
-    from ..catalog import find_scenario
-
     scn = scenario if isinstance(scenario, sim.Scenario) else \
         sim.load_scenario(find_scenario(scenario))
     return sim.quick_variant(scn) if quick else scn
@@ -405,17 +390,6 @@ def _load_grid(value, name: str) -> OccupancyGrid | None:
     if value is None or isinstance(value, OccupancyGrid):
         return value
     if isinstance(value, (str, Path)):
-        from gridmap import load_map
-
         return load_map(value)
     raise TypeError(f"{name} must be an OccupancyGrid or a map_server YAML path, got "
                     f"{type(value).__name__}")
-
-
-def register() -> None:
-    """Register ``WarehouseMapUpdate-v0`` with gymnasium (once)."""
-    if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="scenarios.gym.env:WarehouseMapUpdateEnv")
-
-
-register()

@@ -37,13 +37,6 @@ class RouteFollowingPolicy:
         return np.array([v, w], np.float64)
 
 
-class StandStillPolicy:
-    """Never moves: the robot watches the world go by from its dock."""
-
-    def __call__(self, observation, info) -> np.ndarray:
-        return np.zeros(2, np.float64)
-
-
 COLUMNS = ("seed", "session", "steps", "return", "terminated", "time_s", "collisions",
            "f1", "precision", "recall", "cc", "ms", "opdf", "ghost_cells", "ape_rmse")
 

@@ -15,9 +15,11 @@ import time as _time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from gridmap import OccupancyGrid, Pose2D
-from gridmap.map_io import MAX_CELLS     # the loader's limit: a map written can be read again
+from gridmap import OccupancyGrid, Pose2D, save_map
+from gridmap.map_io import MAX_CELLS  # the loader's limit: a map written can be read again
+from gridmap.mapping import LogOddsMapper
 from robotlogs import LogError, log_observations
 
 MAP_SOURCES = ("recorded", "truth")
@@ -32,9 +34,6 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
     """Build a map from the scans of ``log_path`` (those within ``start_time`` / ``end_time``
     [s, log time] when given) and save it as ``out_path``; returns a summary. ``params``: a
     ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1)."""
-    from gridmap import save_map
-    from gridmap.mapping import LogOddsMapper
-
     wall0 = _time.perf_counter()
     if pose_source not in MAP_SOURCES:
         raise LogError(f"the map's poses must be one of {', '.join(MAP_SOURCES)}, got "
@@ -58,7 +57,6 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
                        f"{found.stats.summary()}")
     frame = map_frame(placed, float(resolution), log_path)
     mapper = LogOddsMapper(frame, params)
-    from tqdm import tqdm
 
     for scan, sensor in tqdm(placed, disable=not progress, unit="scan", leave=False,
                              desc=f"mapping {Path(log_path).name}", dynamic_ncols=True):
@@ -118,13 +116,3 @@ def _refuse_clash(log_path, out_path) -> None:
     for path in (Path(out_path), Path(out_path).with_suffix(".pgm")):
         if path.resolve() == log:
             raise LogError(f"{out_path}: the map would overwrite the log {log_path}")
-
-
-def summary_lines(s: dict) -> list[str]:
-    """The summary of ``map_from_log`` as lines for the command line."""
-    w, h = s["size"]
-    out = [f"wrote {s['out']}: {w} x {h} cells at {s['resolution']} m, origin "
-           f"({s['origin'][0]:g}, {s['origin'][1]:g}); {s['occupied']} occupied, "
-           f"{s['free']} free",
-           f"  {s['scans_mapped']} of {s['scans']} scans mapped (poses: {s['pose_source']})"]
-    return out + [f"  {line}" for line in s["read_lines"]]

@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from functools import partial
 
 from gridmap import Pose2D, Scan
+from updater import MapMethod, ScanReport, ScanStatus
 
 
 @dataclass
@@ -47,22 +48,21 @@ class PipelineCounts:
 @dataclass(frozen=True)
 class Step:
     """One ``step``: the robot pose the scan was placed at (map frame, before any refinement by
-    the pose check; None when there was none), the updater's report (None without an updater
-    or a pose, or when the localiser was not tracking) and the sensor pose the updater used
-    (the pose check's refinement when it refined; None when the updater was not asked)."""
+    the pose check; None when there was none) and the updater's report (None without an
+    updater or a pose, or when the localiser was not tracking), whose ``sensor_pose`` is the
+    pose the updater used (the pose check's refinement when it refined)."""
 
     robot_pose: Pose2D | None
-    report: object | None     # updater.ScanReport
-    sensor_pose: Pose2D | None = None
+    report: ScanReport | None
 
 
 class RobotPipeline:
     """Localiser (optional), pose check (optional), mount and updater (optional) of one robot
     on one reference map.
 
-    ``updater``: an ``updater.MapUpdater``, or any method with its interface (``process``,
-    ``updated_map``, ``state_bytes``: the baselines of ``scenarios.methods``); None:
-    localisation only, as the runner's second localiser on M1. ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
+    ``updater``: an ``updater.MapUpdater``, or any ``updater.MapMethod`` (the baselines and
+    the hybrid of ``robot.methods``); None: localisation only, as the runner's second
+    localiser on M1. ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
     ``tracking``: a ``localization.tracking.TrackingMonitor``, judging the localiser after each
@@ -73,8 +73,8 @@ class RobotPipeline:
     (pose check included) [s].
     """
 
-    def __init__(self, updater=None, localizer=None, pose_check=None, tracking=None,
-                 smoother=None):
+    def __init__(self, updater: MapMethod | None = None, localizer=None, pose_check=None,
+                 tracking=None, smoother=None):
         self.updater = updater
         self.localizer = localizer
         self.pose_check = pose_check
@@ -101,23 +101,15 @@ class RobotPipeline:
             self.counts.scans_not_tracking += 1
             return Step(robot, None)
         t0 = time.process_time()
-        sensor = robot.compose(mount)
-        used = [sensor]
         check = None if self.pose_check is None else partial(
-            self._verdict, scan, robot, mount, cov, used)
-        report = self.updater.process(scan, sensor, odometry=odometry, pose_check=check)
+            self.pose_check.verdict, scan, robot, mount, cov)
+        report = self.updater.process(scan, robot.compose(mount), odometry=odometry,
+                                      pose_check=check)
         self.cpu["updater_s"] += time.process_time() - t0
         self._count(report)
         if self.tracking is not None and report.processed:
             self.tracking.observe_lost(report.dropped_as_lost, float(scan.time))
-        return Step(robot, report, used[-1])
-
-    def _verdict(self, scan, robot, mount, cov, used: list):
-        """The pose check's verdict, noting the sensor pose it refines to."""
-        verdict = self.pose_check.verdict(scan, robot, mount, cov)
-        if verdict.sensor_pose is not None:
-            used.append(verdict.sensor_pose)
-        return verdict
+        return Step(robot, report)
 
     def _locate(self, scan, mount, odometry, pose):
         """(robot pose in the map frame, its covariance or None)."""
@@ -137,9 +129,7 @@ class RobotPipeline:
         self.cpu["localizer_s"] += time.process_time() - t0
         return robot, est.cov
 
-    def _count(self, report) -> None:
-        from updater import ScanStatus
-
+    def _count(self, report: ScanReport) -> None:
         c = self.counts
         c.scans_processed += report.processed
         c.scans_dropped_as_lost += report.status is ScanStatus.LOST

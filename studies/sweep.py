@@ -26,18 +26,35 @@ plots.
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import re
+import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+import yaml
+from tqdm import tqdm
+
+import sim
 from gridmap import MapUpdatingError
+from gridmap.atomic import write_atomically
 from gridmap.suggest import did_you_mean
+from robot.methods import check_method
+from robot.robot_config import CLASSES, SECTIONS, load_robot_config, section_config
+from scenarios.catalog import find_scenario
+from scenarios.checkpoint import _sha256
+from scenarios.generator import check_arguments, write_generated
+from scenarios.runner import RunOptions, run_scenario
+
+from .study_report import session_rows, summarise
+from .sweep_ray import ray_tasks, require_ray
 
 SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
-# The most runs one spec may ask for: a study of 20 warehouses x 3 seeds x 5 methods is 300,
-# and a run of the built-in warehouse takes about 10 s on 2 cores.
+# The most runs one spec may ask for (the study of 20 warehouses x 3 seeds x 5 methods is 300;
+# what a run costs is in benchmarks/RESULTS.md).
 MAX_RUNS = 10_000
 GENERATE_KEYS = ("seeds", "size", "sessions", "fov")
 RESULT_FORMAT = 1
@@ -63,8 +80,6 @@ class RunSpec:
 
     def definition(self) -> dict:
         """What makes the run this run (its result is reused only for the same)."""
-        from .checkpoint import _sha256
-
         d = asdict(self)
         d["scenario_sha256"] = _sha256(Path(self.scenario_file))
         return d
@@ -104,8 +119,6 @@ def _check_keys(node, known, source: str, key: str) -> dict:
 
 def load_spec(path) -> dict:
     """The spec of ``path``, checked; raises ``SweepError`` at the first problem."""
-    import yaml
-
     path = Path(path)
     source = str(path)
     try:
@@ -124,8 +137,6 @@ def load_spec(path) -> dict:
 
 def check_spec(spec: dict, source: str, base: Path) -> dict:
     """The spec with defaults filled in and every entry checked (see the module docstring)."""
-    from .methods import check_method
-
     out = {"scenarios": [_scenario_entry(s, source, f"scenarios[{j}]", base)
                          for j, s in enumerate(_nonempty_list(spec["scenarios"], source,
                                                               "scenarios"))]}
@@ -149,8 +160,6 @@ def check_spec(spec: dict, source: str, base: Path) -> dict:
 
 
 def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
-    from .catalog import find_scenario
-
     if isinstance(entry, str):
         local = base / entry
         try:
@@ -165,8 +174,6 @@ def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
 
 
 def _generate_entry(node, source: str, key: str) -> dict:
-    from .generator import check_arguments
-
     node = _check_keys(node, GENERATE_KEYS, source, key)
     if "seeds" not in node:
         _fail(source, f"{key}.seeds", "missing required key (the layouts' seeds)")
@@ -181,8 +188,6 @@ def _generate_entry(node, source: str, key: str) -> dict:
 
 
 def _base_config(node, source: str) -> dict:
-    from .robot_config import load_robot_config
-
     if node is None:
         return {}
     if not isinstance(node, dict):
@@ -196,10 +201,6 @@ def _base_config(node, source: str) -> dict:
 def _grid(node, config: dict, source: str) -> dict:
     """Dotted key -> values; every value is tried on its section now, so that a bad one stops
     the sweep before its first run."""
-    from dataclasses import fields
-
-    from .robot_config import CLASSES, SECTIONS, section_config
-
     if node is None:
         return {}
     if not isinstance(node, dict):
@@ -249,10 +250,6 @@ def _slug(text: str) -> str:
 def scenario_files(spec: dict, out_dir: Path, progress: bool = False) -> list[tuple[str, Path]]:
     """(name, file) of every scenario of the spec; generated ones are written to
     ``DIR/scenarios/`` unless already there (generation is deterministic)."""
-    import sim
-
-    from .generator import write_generated
-
     out = []
     layouts = sum(len(e["generate"]["seeds"]) for e in spec["scenarios"] if "generate" in e)
     with _progress(progress and layouts > 0, total=layouts, desc="layouts", unit="layout",
@@ -330,17 +327,10 @@ class SessionClock:
 def execute(run: RunSpec, runs_dir) -> dict:
     """Play ``run`` as ``mapupdate run`` would, in ``runs_dir/<key>/``, and write its rows to
     ``result.json`` there (atomically, last: the mark that the run is finished)."""
-    from gridmap.atomic import write_atomically
-
-    from .robot_config import load_robot_config
-    from .runner import RunOptions, run_scenario
-    from .study_report import session_rows
-
     folder = Path(runs_dir) / run.key
     if folder.exists():
         # a run a killed sweep left unfinished (no result.json): the sweep's own output,
         # played again from the start, since a new run never goes into a folder holding one
-        import shutil
 
         shutil.rmtree(folder)
     config = load_robot_config(run.config or None, source=run.key)
@@ -384,9 +374,6 @@ def _sequential(runs, runs_dir):
 
 def _pool(runs, runs_dir, workers: int):
     """Yield (run, record) as the runs finish on a pool of ``workers`` processes."""
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
     # spawn: a fresh interpreter per worker, whatever threads the parent runs
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
@@ -403,8 +390,6 @@ def _pool(runs, runs_dir, workers: int):
 
 
 def _progress(enabled: bool, **kw):
-    from tqdm import tqdm
-
     return tqdm(disable=not enabled, dynamic_ncols=True, **{"unit": "run", **kw})
 
 
@@ -420,16 +405,10 @@ def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None
     """Run every unfinished run of the spec into ``out``, then write the study's results;
     returns the number of runs of the spec. ``workers``: processes of the local pool (default
     the CPUs; 1 runs in this process); ``ray``: "auto" (a local Ray) or a cluster's address."""
-    from gridmap.atomic import write_atomically
-
-    from .study_report import summarise
-
     spec = load_spec(spec_path)
     if workers is not None and (isinstance(workers, bool) or workers < 1):
         raise SweepError(f"--workers must be at least 1, got {workers}")
     if ray is not None:
-        from .sweep_ray import require_ray
-
         require_ray()
     out = Path(out)
     runs_dir = out / "runs"
@@ -451,8 +430,6 @@ def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None
 def _dispatch(todo, runs_dir, workers: int, ray: str | None):
     try:
         if ray is not None:
-            from .sweep_ray import ray_tasks
-
             yield from ray_tasks(execute, todo, runs_dir, ray, workers)
         elif workers == 1 or len(todo) <= 1:
             yield from _sequential(todo, runs_dir)

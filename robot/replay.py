@@ -42,14 +42,20 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
-from robotlogs import LogError, Observation, log_observations
-
+from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, load_map, save_map
+from localization import LocalizerConfig, MonteCarloLocalizer
+from localization.confidence import PoseCheck
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
+from localization.tracking import TrackingMonitor
+from robotlogs import LogError, Observation, log_observations
+from robotlogs.tum import write_tum
+from updater import MapUpdater, ScanStatus, UpdaterConfig
 
-from .methods import ROBOT_METHODS, check_method
-from .pipeline import RobotPipeline
+from .methods import ROBOT_METHODS, check_method, make_method
+from .pipeline import RobotPipeline, Step
+from .robot_config import ROBOT_UPDATER_DEFAULTS
 
 POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
 # The summary's counts of changed cells (``_changes``), each cell in one of them.
@@ -156,61 +162,96 @@ class Replay:
 
 # --- the replay --------------------------------------------------------------------------------
 
-def update_from_log(map_path, log_path, out_path, state_path=None, *, pose_source: str = "auto",
-                    updater_config=None, localizer_config=None, progress: bool = True,
-                    log_format: str | None = None, strict: bool = False, scan_topics=None,
-                    odom_topic=None, pose_topic=None, truth_topic=None,
-                    laser_mount: Pose2D | None = None, initial_pose: Pose2D | None = None,
-                    initial_std=INITIAL_STD, start_time: float | None = None,
-                    end_time: float | None = None, seed: int = 0,
-                    pose_check: bool = False, pose_check_config=None,
-                    trajectory_path=None, tracking_config=None,
-                    smooth_window: float = SMOOTH_WINDOW, method: str = "paper") -> dict:
-    """Update the map at ``map_path`` with the scans of ``log_path``; write ``out_path``.
+@dataclass(frozen=True)
+class LogSource:
+    """Where the log is and how to read it: ``path`` (a ROS 1 bag, a ROS 2 bag folder or a
+    CARMEN log), its ``format`` (None: detected), ``strict`` (a malformed line or message is
+    an error instead of a counted skip), the topics of a bag (None: found), ``laser_mount``
+    (None: the log's), and ``start_time`` / ``end_time`` [s, log time] that limit the scans
+    used."""
 
-    With ``state_path``, the updater's state is loaded from it when the file exists (so this
-    recording continues the last one) and saved to it at the end. ``start_time`` /
-    ``end_time`` [s, log time] limit the scans used. ``pose_check``: scans whose pose the
-    scan's own fit to the reference map (and, with the localiser, its covariance) calls unsure
-    change nothing (``localization.confidence.PoseCheck``). ``strict``: a malformed log line or
-    message is an error instead of a counted skip. ``smooth_window`` [s]: recorded poses of a
-    localisation apart from the odometry are smoothed with it over that window
-    (``localization.smoothing.PoseSmoother``; 0: used as recorded). ``trajectory_path``: the
-    robot pose of each scan the update was given, as it was placed (smoothed, and the pose
-    check's refinement where it refined; scans it refused and scans withheld while the
-    localiser was not tracking are left out), in TUM format. No ``updater_config``: the robot's
-    defaults (``robot_config.ROBOT_UPDATER_DEFAULTS``). ``method``: what updates the map, one
-    of ``methods.ROBOT_METHODS``; ``state_path`` only with ``"paper"``. Returns a summary for
-    people (``summary_lines``)."""
-    from gridmap import load_map
+    path: Path
+    format: str | None = None
+    strict: bool = False
+    scan_topics: tuple[str, ...] | None = None
+    odom_topic: str | None = None
+    pose_topic: str | None = None
+    truth_topic: str | None = None
+    laser_mount: Pose2D | None = None
+    start_time: float | None = None
+    end_time: float | None = None
 
+
+@dataclass(frozen=True)
+class Placement:
+    """How scans are placed on the map. ``source``: where the poses come from (``POSE_SOURCES``,
+    the module's docstring). ``initial_pose`` / ``initial_std`` / ``seed``: the localiser's
+    start. ``smooth_window`` [s]: recorded poses of a localisation apart from the odometry are
+    smoothed with it over that window (``localization.smoothing.PoseSmoother``; 0: as
+    recorded). ``pose_check``: scans whose pose the scan's own fit to the reference map (and,
+    with the localiser, its covariance) calls unsure change nothing
+    (``localization.confidence.PoseCheck``). The configurations: None for the classes'
+    defaults."""
+
+    source: str = "auto"
+    initial_pose: Pose2D | None = None
+    initial_std: tuple[float, float, float] = INITIAL_STD
+    seed: int = 0
+    smooth_window: float = SMOOTH_WINDOW
+    pose_check: bool = False
+    localizer_config: object | None = None       # localization.LocalizerConfig
+    pose_check_config: object | None = None      # localization.confidence.PoseCheckConfig
+    tracking_config: object | None = None        # localization.tracking.TrackingConfig
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What to write: the updated map (``map``, a map_server YAML and its image); the updater's
+    ``state``, loaded first when the file exists (so this recording continues the last one)
+    and saved at the end; the ``trajectory``: the robot pose of each scan the update was given,
+    as it was placed (smoothed, refined by the pose check where it refined; scans it refused or
+    withheld while the localiser was not tracking left out), in TUM format."""
+
+    map: Path
+    state: Path | None = None
+    trajectory: Path | None = None
+
+
+def update_from_log(map_path, log: LogSource, outputs: Outputs,
+                    placement: Placement = Placement(), *, method: str = "paper",
+                    updater_config=None, progress: bool = False) -> dict:
+    """Update the map at ``map_path`` with the scans of ``log``; write ``outputs``, each
+    atomically. ``method``: what updates the map, one of ``methods.ROBOT_METHODS`` (a state
+    only with ``"paper"``); no ``updater_config``: the robot's defaults
+    (``robot_config.ROBOT_UPDATER_DEFAULTS``). ``progress``: a progress bar on stderr.
+    Returns what happened as a dict (``mapupdate.summaries.update_lines`` says it in words)."""
     wall0 = _time.perf_counter()
-    check_update_arguments(pose_source, smooth_window, method, state_path)
-    _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path)
+    place, state_path = placement, outputs.state
+    check_update_arguments(place.source, place.smooth_window, method, state_path)
+    _refuse_clashes(log.path, map_path, state_path, outputs.map, outputs.trajectory)
     grid = load_map(map_path)
-    found = log_observations(log_path, log_format=log_format, strict=strict,
-                             scan_topics=scan_topics, odom_topic=odom_topic,
-                             pose_topic=pose_topic, truth_topic=truth_topic,
-                             laser_mount=laser_mount)
-    source = _choose_source(pose_source, found.has, log_path, initial_pose is not None)
+    found = log_observations(log.path, log_format=log.format, strict=log.strict,
+                             scan_topics=log.scan_topics, odom_topic=log.odom_topic,
+                             pose_topic=log.pose_topic, truth_topic=log.truth_topic,
+                             laser_mount=log.laser_mount)
+    source = _choose_source(place.source, found.has, log.path, place.initial_pose is not None)
     updater, state_loaded = _updater(grid, updater_config, state_path, method)
-    pipeline = _pipeline(updater, pose_check, pose_check_config,
-                         _smoother(smooth_window, source, found.has))
+    pipeline = _pipeline(updater, place.pose_check, place.pose_check_config,
+                         _smoother(place.smooth_window, source, found.has))
     starter = None
     if source == "localizer":
-        starter = LocalizerStart(grid, localizer_config, initial_pose, initial_std, seed,
-                                 found.has["map_frame"], tracking_config, pose_check_config)
-    replay = _replay(pipeline, found, source, starter, (start_time, end_time),
-                     f"updating from {Path(log_path).name}" if progress else None)
-    _check_placed(pipeline, replay, found, log_path)
-    updated = _save_outputs(updater, replay, out_path, state_path, trajectory_path)
+        starter = LocalizerStart(grid, place, found.has["map_frame"])
+    replay = _replay(pipeline, found, source, starter, (log.start_time, log.end_time),
+                     f"updating from {Path(log.path).name}" if progress else None)
+    _check_placed(pipeline, replay, found, log.path)
+    updated = _save_outputs(updater, replay, outputs)
     return {
-        "log": str(log_path), "format": found.format, "map": str(map_path),
-        "out": str(out_path), "state": None if state_path is None else str(state_path),
+        "log": str(log.path), "format": found.format, "map": str(map_path),
+        "out": str(outputs.map), "state": None if state_path is None else str(state_path),
         "state_loaded": state_loaded, "method": method, "pose_source": source,
         **_what_happened(pipeline, replay, found), **_changes(grid, updated),
         "evidence": _evidence(updater),
-        "trajectory": None if trajectory_path is None else str(trajectory_path),
+        "trajectory": None if outputs.trajectory is None else str(outputs.trajectory),
         "wall_s": _time.perf_counter() - wall0,
     }
 
@@ -261,24 +302,18 @@ def _smoothing_summary(smoother: PoseSmoother | None) -> dict:
 def _pipeline(updater, pose_check: bool, pose_check_config, smoother=None) -> RobotPipeline:
     guard = None
     if pose_check:
-        from localization.confidence import PoseCheck
-
         guard = PoseCheck(updater.reference_map, pose_check_config)
     return RobotPipeline(updater, pose_check=guard, smoother=smoother)
 
 
-def _save_outputs(updater, replay: Replay, out_path, state_path, trajectory_path):
+def _save_outputs(updater, replay: Replay, outputs: Outputs):
     """The updated map (returned), and the state and trajectory when asked, each atomically."""
-    from gridmap import save_map
-
     updated = updater.updated_map()
-    save_map(updated, out_path)
-    if state_path is not None:
-        updater.save(state_path)
-    if trajectory_path is not None:
-        from .report import write_tum
-
-        write_tum(Path(trajectory_path), np.asarray(replay.times),
+    save_map(updated, outputs.map)
+    if outputs.state is not None:
+        updater.save(outputs.state)
+    if outputs.trajectory is not None:
+        write_tum(Path(outputs.trajectory), np.asarray(replay.times),
                   np.asarray(replay.poses).reshape(-1, 3))
     return updated
 
@@ -288,8 +323,6 @@ def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
     """Feed the log's observations within ``window`` (start, end [s], None for open) to the
     pipeline; the localiser, if the poses are to come from one, starts at the first
     observation with odometry. Returns what the update used."""
-    from tqdm import tqdm
-
     first, last = window
     out = Replay()
     with tqdm(total=found.total, disable=progress is None, unit="scan", dynamic_ncols=True,
@@ -309,20 +342,18 @@ def _replay(pipeline: RobotPipeline, found, source: str, starter, window,
                 out.first_time = obs.time
             pose, mount = _given_pose(obs, source, pipeline.smoother is not None)
             step = pipeline.step(obs.scan, mount, odometry=obs.odom, pose=pose)
-            _note_pose(out, obs, step, mount)
+            _note_pose(out, obs, step)
     return out
 
 
-def _note_pose(out: Replay, obs: Observation, step, mount: Pose2D) -> None:
+def _note_pose(out: Replay, obs: Observation, step: Step) -> None:
     """Record the robot pose the update placed the scan at (refined or not), unless the scan
     changed nothing because its pose was refused or withheld."""
-    from updater import ScanStatus
-
     if step.report is None or step.report.status is ScanStatus.REFUSED:
         return
-    robot = step.sensor_pose.compose(mount.inverse())
-    if mount is NO_MOUNT:            # the log gave the laser's pose: back to the robot's
-        robot = robot.compose(obs.mount.inverse())
+    # the laser's pose, as given or refined, back to the robot's (also when the log gave the
+    # laser's pose and the pipeline was given no mount)
+    robot = step.report.sensor_pose.compose(obs.mount.inverse())
     out.times.append(obs.time)
     out.poses.append((robot.x, robot.y, robot.theta))
 
@@ -383,10 +414,8 @@ class LocalizerStart:
     at the observation's recorded pose when the log's poses are a localisation
     (``map_frame``), else over the whole map. ``how`` says which, for the summary."""
 
-    def __init__(self, grid, config, initial_pose, initial_std, seed, map_frame,
-                 tracking_config=None, pose_check_config=None):
-        from localization import LocalizerConfig
-
+    def __init__(self, grid, placement: Placement, map_frame: bool):
+        config, initial_pose = placement.localizer_config, placement.initial_pose
         if config is None:
             config = LocalizerConfig(**LOCALIZER_DEFAULTS)
         elif isinstance(config, dict):
@@ -397,16 +426,15 @@ class LocalizerStart:
                                              and initial_pose.is_finite()):
             raise LogError(f"the initial pose must be three finite numbers X Y YAW, got "
                            f"{initial_pose!r}")
-        self.grid, self.config, self.seed = grid, config, seed
-        self.initial_pose, self.initial_std, self.map_frame = initial_pose, initial_std, map_frame
-        self.tracking_config, self.pose_check_config = tracking_config, pose_check_config
+        self.grid, self.config, self.seed = grid, config, placement.seed
+        self.initial_pose, self.initial_std = initial_pose, placement.initial_std
+        self.map_frame = map_frame
+        self.tracking_config = placement.tracking_config
+        self.pose_check_config = placement.pose_check_config
         self.how = ""
 
     def start(self, obs: Observation):
         """(localiser, its tracking monitor)."""
-        from localization import MonteCarloLocalizer
-        from localization.tracking import TrackingMonitor
-
         loc = MonteCarloLocalizer(self.grid, self.config, seed=self.seed)
         pose = self.initial_pose or (obs.recorded if self.map_frame else None)
         monitor = TrackingMonitor(self.grid, self.tracking_config, self.pose_check_config,
@@ -453,11 +481,6 @@ def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper"
     updater saved in ``state_path`` when that exists. A state holds its reference map whole,
     which is its fingerprint: it is refused for any other map, and a configuration given with
     it must be the one it was made with (its buffers follow that configuration)."""
-    from updater import MapUpdater, UpdaterConfig
-
-    from .methods import make_method
-    from .robot_config import ROBOT_UPDATER_DEFAULTS
-
     if isinstance(config, dict):
         config = UpdaterConfig.from_dict(config)
     elif isinstance(config, (str, Path)):
@@ -511,156 +534,6 @@ def _evidence(updater) -> dict | None:
     if summary is None:
         return None
     return {**summary(), "threshold": int(updater.config.threshold)}
-
-
-# --- the summary, for people --------------------------------------------------------------------
-
-def summary_lines(s: dict) -> list[str]:
-    """The summary of ``update_from_log`` as lines for the command line: the map written and
-    its cells changed by kind, the scans and what became of them, what the readers skipped
-    (one line per kind), the gate's refusals by rule, the evidence of change left below the
-    threshold, how the localiser fared, warnings. When no cell changed, a line says why."""
-    g = s.get
-    changed = sum(g(k, 0) for k in CHANGE_KEYS)
-    used = f"method {g('method', 'paper')}, poses {g('pose_source')}"
-    out = [f"wrote {g('out')}: {_changes_text(s) if changed else '0 cells changed'}; {used}"]
-    skipped = sum((g("read") or {}).get("skipped", {}).values())
-    out.append(f"  {g('scans', 0)} scans read" + (f" ({skipped} lines or messages of the log "
-                                                   "skipped, below)" if skipped else "")
-               + f", {g('scans_used', g('scans', 0))} used; {g('scans_processed', 0)} "
-               f"processed past the gate, {g('scans_dropped_as_lost', 0)} dropped as lost, "
-               f"{g('scans_refused_by_pose_check', 0)} refused by the pose check"
-               + (f", {g('scans_off_map')} off the map" if g("scans_off_map") else ""))
-    out += [f"  {line}" for line in g("read_lines") or []]
-    if not changed:
-        out.append(f"  0 cells changed: {_why_unchanged(s)}")
-    else:
-        out += [f"  {part}" for part in (_gate_text(s), _pending_text(s)) if part]
-    smooth = g("smoothing") or {}
-    if smooth.get("scans_smoothed"):
-        out.append(f"  {smooth['scans_smoothed']} recorded poses jittered against the odometry "
-                   f"and were smoothed over {smooth['window_s']:g} s (--smooth-poses 0: as "
-                   f"recorded)" + (f"; {smooth['restarts']} jumps of the localisation restarted "
-                                   f"the smoothing" if smooth.get("restarts") else ""))
-    out += [f"  warning: {w}" for w in _warnings(s)]
-    track = g("tracking")
-    if track:
-        out.append(f"  localiser: {track['start']}")
-        out += [f"  localiser {e['state']} {e['after']:.1f} s into the log: {e['reason']}"
-                for e in track["events"]]
-        if g("scans_not_tracking"):
-            out.append(f"  warning: {g('scans_not_tracking')} scans were not used: the "
-                       "localiser was not tracking")
-    if g("trajectory"):
-        out.append(f"  wrote {g('trajectory')} (TUM)")
-    return out
-
-
-def _changes_text(s: dict) -> str:
-    """"12 occupied cells freed, 40 free cells occupied, 8795 unknown cells now known (8790
-    free, 5 occupied)"."""
-    g = s.get
-    known = g("unknown_to_free", 0) + g("unknown_to_occupied", 0)
-    text = (f"{g('occupied_to_free', 0)} occupied cells freed, {g('free_to_occupied', 0)} free "
-            f"cells occupied, {known} unknown cells now known ({g('unknown_to_free', 0)} free, "
-            f"{g('unknown_to_occupied', 0)} occupied)")
-    if g("known_to_unknown"):
-        text += f", {g('known_to_unknown')} known cells now unknown"
-    return text
-
-
-def _gate_text(s: dict, brief: bool = False) -> str:
-    """"the gate refused 380 of 406 scans: fast turn 300, no motion 80" ("" when it refused
-    none); ``brief``: the rules in parentheses."""
-    gated = s.get("scans_gated", 0)
-    if not gated:
-        return ""
-    rules = sorted((s.get("gated_by") or {}).items(), key=lambda kv: (-kv[1], kv[0]))
-    listed = ", ".join(f"{rule} {n}" for rule, n in rules)
-    head = f"the gate refused {gated} of {s.get('scans_used', gated)} scans"
-    text = f"{head} ({listed})" if brief else f"{head}: {listed}"
-    if s.get("scans_confirming"):
-        text += (f"; {s['scans_confirming']} of them, views already taken, confirmed the "
-                 "map's surfaces")
-    return text
-
-
-def _pending_text(s: dict, brief: bool = False) -> str:
-    """The cells whose evidence of change stayed below the threshold ("" for none, or for a
-    method that keeps no such evidence)."""
-    e = s.get("evidence")
-    if not e or not e.get("pending_cells"):
-        return ""
-    head = f"{e['pending_cells']} cells collected evidence of change below the threshold"
-    if e.get("pending_few_observations") is None:      # the updater did not count flags
-        return head
-    few = f"{e['pending_few_observations']} seen by fewer than {e['threshold']} processed scans"
-    if brief:
-        return f"{head} ({few})"
-    return f"{head}: {few}, {e['pending_outvoted']} outvoted by scans that saw them unchanged"
-
-
-def _why_unchanged(s: dict) -> str:
-    """Why the output changed no cell: the evidence left below the threshold and the scans
-    that never reached the map, each counted."""
-    g = s.get
-    why = [part for part in (_pending_text(s, brief=True), _gate_text(s, brief=True)) if part]
-    for key, text in (("scans_refused_by_pose_check", "the pose check refused {} scans"),
-                      ("scans_dropped_as_lost", "the lost check dropped {} scans"),
-                      ("scans_off_map", "{} scans lay off the map"),
-                      ("scans_not_tracking", "{} scans came while the localiser was not "
-                                             "tracking")):
-        if g(key):
-            why.append(text.format(g(key)))
-    processed = g("scans_processed", 0)
-    if not processed:
-        why.insert(0, "no scan was processed")
-    elif not why:
-        why.append(f"the {processed} scans processed found no evidence of change"
-                   if g("evidence") is not None else
-                   f"the {processed} scans processed gave no cell evidence enough to change it")
-    return "; ".join(why)
-
-
-def _warnings(s: dict) -> list[str]:
-    """What a user should look at: scans whose poses disagree with the map, mostly, and stamps
-    that do not tell time."""
-    g = s.get
-    asked = g("scans_processed", 0) + g("scans_refused_by_pose_check", 0)
-    stamps = _stamps_text(g("timestamps"))
-    out = [stamps] if stamps else []
-    if asked and g("scans_refused_by_pose_check", 0) > 0.5 * asked:
-        out.append(f"the pose check refused {g('scans_refused_by_pose_check')} of the {asked} "
-                   "scans past the gate: their poses disagree with the map (drifted odometry? "
-                   "try --poses localizer)")
-    if g("format") in ("ros1", "ros2") and (g("timestamps") or {}).get("earlier_than_before"):
-        out.append("the bag's clock went back: tf and odometry are looked up at the scans' "
-                   "stamps, which now stand for two moments of the recording, so scans may be "
-                   "placed at poses of the other; check the trajectory (--trajectory)")
-    if g("scans_processed", 0) and g("scans_dropped_as_lost", 0) > 0.5 * g("scans_processed"):
-        out.append(f"the lost check dropped {g('scans_dropped_as_lost')} of the "
-                   f"{g('scans_processed')} scans processed: most beams disagree with the map "
-                   "there (wrong poses, or a place the map does not cover)")
-    return out
-
-
-def _stamps_text(t: dict | None) -> str:
-    """"404 of 406 scans have the same timestamp as the scan before; ...", or "" when every
-    stamp increased."""
-    if not t or not (t["same_as_before"] or t["earlier_than_before"]):
-        return ""
-    same, earlier, n = t["same_as_before"], t["earlier_than_before"], t["scans"]
-    if same and earlier:
-        what = f"{same} of {n} scans have the same timestamp as the scan before and {earlier} " \
-               "an earlier one"
-    elif same:
-        what = f"{same} of {n} scans have the same timestamp as the scan before"
-    else:
-        what = f"{earlier} of {n} scans have an earlier timestamp than the scan before"
-    period = "the median interval between the log's scans" if t["period_measured"] else \
-        "the log gives no interval between its scans"
-    return f"{what}; their times were taken from scan order, {t['period_s']:g} s after the " \
-           f"scan before ({period}), for the gate and the pose smoothing"
 
 
 def parse_pose(values) -> Pose2D:

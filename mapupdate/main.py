@@ -1,15 +1,22 @@
-"""The command line, ``mapupdate``: parses arguments and calls the library; nothing else.
+"""The command line, ``mapupdate``: its parser, and the one-line errors.
 
-Heavy modules (numba kernels, pymunk, matplotlib) are imported inside the subcommands so that
-``mapupdate --help`` answers at once.
+Each command lives in the module of its area (``robot_commands``, ``testbed_commands``,
+``study_commands``), loaded only when that command runs: a robot's command never loads the
+simulated testbed, and ``mapupdate --help`` answers at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
 
+from gridmap import MapUpdatingError
+from localization.smoothing import SMOOTH_WINDOW
+
+from .extras import missing_extra
+from .version import __version__
 
 CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, each optional, "
                "holding the fields of updater.UpdaterConfig, localization.LocalizerConfig and "
@@ -17,168 +24,12 @@ CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, e
                "class's defaults. --pose-check/--no-pose-check still turn the check on or off")
 
 
-def _cmd_compare(args) -> int:
-    from gridmap import load_map
-    from gridmap.metrics import compare_maps
-
-    a, b = load_map(args.a), load_map(args.b)
-    m = compare_maps(a, b)
-    print(f"{'metric':<8}{'value':>10}")
-    print(f"{'CC':<8}{m['cc']:>9.2f}%")
-    print(f"{'MS':<8}{m['ms']:>9.2f}%")
-    print(f"{'OPDF':<8}{m['opdf']:>9.2f}%")
-    return 0
-
-
-def _cmd_render(args) -> int:
-    import sim
-
-    from .catalog import find_scenario
-    from .outputs import check_outputs
-
-    path = find_scenario(args.scenario)
-    check_outputs({"scenario": [path]}, {"--out": [args.out]})
-    scenario = sim.load_scenario(path)
-    out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
-    print(f"wrote {out}")
-    return 0
-
-
-def _cmd_run(args) -> int:
-    from .checkpoint import ResumeError
-    from .observers import Observers
-    from .methods import check_method
-    from .robot_config import load_robot_config
-    from .runner import RunOptions, run_scenario
-
-    config = load_robot_config(args.config)     # refused before anything is written
-    check_method(args.method, "--method")
-    if args.resume is not None and args.out is not None and args.out != args.resume:
-        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
-    observers = []
-    if args.bag is not None:
-        from .session_bags import SessionBagRecorder
-
-        observers.append(SessionBagRecorder(args.bag, args.bag_format))
-    recorder = _rerun_recorder(args) if args.rerun or args.rerun_spawn else None
-    if recorder is not None:
-        observers.append(recorder)
-    given = {} if args.pose_check is None else {"pose_check": args.pose_check}
-    opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
-                      quick=args.quick, progress=not args.no_progress,
-                      updater_config=config.updater, localizer_config=config.localizer,
-                      pose_check_config=config.pose_check,
-                      observer=Observers(*observers) if observers else None,
-                      resume=args.resume is not None, method=args.method, **given)
-    try:
-        result = run_scenario(args.scenario, opts)
-    finally:
-        if recorder is not None:
-            recorder.close()
-    print(f"wrote {result.out_dir}/report.md and metrics.json")
-    if args.rerun:
-        print(f"wrote {args.rerun}: open it with `rerun {args.rerun}`")
-    return 0
-
-
-def _rerun_recorder(args):
-    from .rerun_log import RerunRecorder, has_display
-
-    spawn = args.rerun_spawn and has_display()
-    if args.rerun_spawn and not spawn:
-        print("mapupdate run: no display here, the viewer is not opened", file=sys.stderr)
-    return RerunRecorder(args.rerun, spawn=spawn) if args.rerun or spawn else None
-
-
-def _cmd_update(args) -> int:
-    from . import replay
-    from .outputs import check_outputs, map_files, map_inputs
-    from .robot_config import load_robot_config
-
-    # the method and --state, then the configuration, are refused before anything is read
-    replay.check_update_arguments(args.poses, args.smooth_poses, args.method, args.state)
-    config = load_robot_config(args.config)
-    check_outputs({"--map": map_inputs(args.map), "--log": [args.log],
-                   "--config": [args.config] if args.config else [],
-                   "--state": [args.state] if args.state and args.state.exists() else []},
-                  {"--out": map_files(args.out), "--state": [args.state] if args.state else [],
-                   "--trajectory": [args.trajectory] if args.trajectory else []},
-                  both=("--state",))
-    start = None if args.initial_pose is None else replay.parse_pose(args.initial_pose)
-    summary = replay.update_from_log(
-        args.map, args.log, args.out, args.state, pose_source=args.poses,
-        updater_config=config.updater, localizer_config=config.localizer,
-        pose_check_config=config.pose_check, progress=not args.no_progress,
-        log_format=args.format, scan_topics=args.scan_topic or None,
-        odom_topic=args.odom_topic, pose_topic=args.pose_topic, pose_check=args.pose_check,
-        strict=args.strict, initial_pose=start, trajectory_path=args.trajectory,
-        smooth_window=args.smooth_poses, method=args.method)
-    summary.setdefault("out", str(args.out))
-    print("\n".join(replay.summary_lines(summary)))
-    return 0
-
-
-def _cmd_map(args) -> int:
-    from . import logmap
-    from .outputs import check_outputs, map_files
-
-    check_outputs({"--log": [args.log]}, {"--out": map_files(args.out)})
-    summary = logmap.map_from_log(args.log, args.out, resolution=args.resolution,
-                                  pose_source=args.poses, log_format=args.format,
-                                  strict=args.strict, scan_topics=args.scan_topic or None,
-                                  odom_topic=args.odom_topic, pose_topic=args.pose_topic,
-                                  progress=not args.no_progress)
-    print("\n".join(logmap.summary_lines(summary)))
-    return 0
-
-
-def _cmd_inject(args) -> int:
-    from evaluation import case_folder, edited_world
-    from gridmap import load_map
-    from robotlogs import log_observations
-
-    case_folder.check_case_dir(args.out, args.map, args.log)      # before anything is read
-    grid = load_map(args.map)
-    found = log_observations(args.log, log_format=args.format, strict=args.strict,
-                             scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
-                             pose_topic=args.pose_topic)
-    case = edited_world.make_case(grid, found.observations, args.seed, removed=args.removed,
-                                  added=args.added, moved=args.moved, people=args.people,
-                                  min_views=args.min_views, progress=not args.no_progress)
-    case_folder.write_case(case, args.out, map_path=args.map, log_path=args.log)
-    print("\n".join(case_folder.case_lines(case, args.out)))
-    return 0
-
-
-def _cmd_score(args) -> int:
-    from evaluation import case_folder
-    from gridmap import load_map
-
-    from .outputs import check_outputs, map_inputs
-
-    if args.json is not None:
-        check_outputs({"DIR": [args.case / f for f in case_folder.CASE_FILES],
-                       "OUT.yaml": map_inputs(args.updated)}, {"--json": [args.json]})
-    scores = case_folder.score_case(args.case, load_map(args.updated))
-    print("\n".join(case_folder.score_lines(scores)))
-    if args.json is not None:
-        case_folder.write_scores(scores, args.json)
-        print(f"wrote {args.json}")
-    return 0
-
-
-def _cmd_ros1(args) -> int:
-    from .ros1.node import run_node
-
-    # an empty --config (a launch file's unset argument) means none
-    return run_node(args.map, args.config or None, args.ros_argv)
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="mapupdate",
         description="Keep a 2D occupancy-grid map true while the world changes.")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     _add_run(sub)
     _add_compare(sub)
@@ -224,19 +75,17 @@ def _add_run(sub) -> None:
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",
                      help="show the run live in a rerun viewer (when there is a display)")
-    run.set_defaults(func=_cmd_run)
+    run.set_defaults(command_at=("testbed_commands", "run"))
 
 
 def _add_compare(sub) -> None:
     cmp_ = sub.add_parser("compare", help="CC, MS and OPDF of two map_server maps")
     cmp_.add_argument("a", type=Path)
     cmp_.add_argument("b", type=Path)
-    cmp_.set_defaults(func=_cmd_compare)
+    cmp_.set_defaults(command_at=("robot_commands", "compare"))
 
 
 def _add_update(sub) -> None:
-    from localization.smoothing import SMOOTH_WINDOW
-
     upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
     upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
     upd.add_argument("--log", type=Path, required=True,
@@ -257,7 +106,7 @@ def _add_update(sub) -> None:
     _add_log_options(upd)
     upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
-                          "covariance) calls unsure (default: off; README, 'Choices')")
+                          "covariance) calls unsure (default: off; docs/choices.md)")
     upd.add_argument("--initial-pose", nargs=3, type=float, default=None,
                      metavar=("X", "Y", "YAW"),
                      help="where the localiser starts, in the map frame [m, m, rad] (default: "
@@ -268,7 +117,7 @@ def _add_update(sub) -> None:
                      help="smooth a recorded localisation (map -> odom, corrected poses) that "
                           "jitters from scan to scan with the odometry over this window "
                           f"(default {SMOOTH_WINDOW:g}; 0: the poses as recorded)")
-    upd.set_defaults(func=_cmd_update)
+    upd.set_defaults(command_at=("robot_commands", "update"))
 
 
 def _add_log_options(p) -> None:
@@ -297,7 +146,7 @@ def _add_map(sub) -> None:
                     help="the log's recorded (corrected) poses, or a simulated log's true "
                          "ones (default: recorded)")
     _add_log_options(mp)
-    mp.set_defaults(func=_cmd_map)
+    mp.set_defaults(command_at=("robot_commands", "map_command"))
 
 
 def _add_inject(sub) -> None:
@@ -323,7 +172,7 @@ def _add_inject(sub) -> None:
     inj.add_argument("--min-views", type=int, default=5, metavar="N",
                      help="scans that must see each box with 3 beams or more (5)")
     _add_log_options(inj)
-    inj.set_defaults(func=_cmd_inject)
+    inj.set_defaults(command_at=("robot_commands", "inject"))
 
 
 def _add_score(sub) -> None:
@@ -333,7 +182,7 @@ def _add_score(sub) -> None:
                     help="the map 'mapupdate update' wrote from DIR/stale.yaml and DIR/log.clf")
     sc.add_argument("--json", type=Path, default=None, metavar="FILE",
                     help="also write the scores as JSON")
-    sc.set_defaults(func=_cmd_score)
+    sc.set_defaults(command_at=("robot_commands", "score"))
 
 
 def _add_ros1(sub) -> None:
@@ -346,7 +195,7 @@ def _add_ros1(sub) -> None:
     ros.add_argument("--config", default=None,
                      help="YAML with 'updater' and 'pose_check' sections; private ROS "
                           "parameters (~updater/threshold, ...) override it")
-    ros.set_defaults(func=_cmd_ros1)
+    ros.set_defaults(command_at=("robot_commands", "ros1"))
 
 
 def _add_render(sub) -> None:
@@ -360,40 +209,7 @@ def _add_render(sub) -> None:
                      help="draw the world at this time [s] of the session (default 0)")
     ren.add_argument("--seed", type=int, default=None,
                      help="seed of the world, which places the people (default: the scenario's)")
-    ren.set_defaults(func=_cmd_render)
-
-
-def _cmd_generate(args) -> int:
-    from .catalog import HERE
-    from .generator import write_generated
-    from .outputs import OutputClash
-
-    out = Path(args.out)
-    if out.exists() and (out.is_dir() or out.resolve().parent == HERE):
-        # a folder, or one of the built-in scenarios this package ships
-        raise OutputClash(f"{out}: is {'a folder' if out.is_dir() else 'a built-in scenario'}; "
-                          "choose another --out")
-    path = write_generated(args.seed, args.out, size=tuple(args.size), sessions=args.sessions,
-                           fov=args.fov)
-    print(f"wrote {path}")
-    return 0
-
-
-def _cmd_sweep(args) -> int:
-    from .study_report import summarise
-    from .sweep import SweepError, run_sweep
-
-    if args.summarise is not None:
-        table = summarise(args.summarise)
-        print(f"wrote {args.summarise}/results.csv, summary.md and figures ({table} runs)")
-        return 0
-    if args.spec is None or args.out is None:
-        raise SweepError("mapupdate sweep needs SPEC.yaml and --out DIR "
-                              "(or --summarise DIR)")
-    done = run_sweep(args.spec, args.out, workers=args.workers, ray=args.ray,
-                     progress=not args.no_progress)
-    print(f"wrote {args.out}/results.csv and summary.md ({done} runs)")
-    return 0
+    ren.set_defaults(command_at=("testbed_commands", "render"))
 
 
 def _add_generate(sub) -> None:
@@ -405,7 +221,7 @@ def _add_generate(sub) -> None:
     gen.add_argument("--sessions", type=int, default=4,
                      help="sessions, the mapping session W1 included (default 4)")
     gen.add_argument("--fov", type=int, default=270, help="lidar field of view, 270 or 360")
-    gen.set_defaults(func=_cmd_generate)
+    gen.set_defaults(command_at=("testbed_commands", "generate"))
 
 
 def _add_sweep(sub) -> None:
@@ -422,14 +238,12 @@ def _add_sweep(sub) -> None:
                     help="rebuild results.csv, summary.md and figures of DIR from its "
                          "finished runs")
     sw.add_argument("--no-progress", action="store_true", help="no progress bar")
-    sw.set_defaults(func=_cmd_sweep)
+    sw.set_defaults(command_at=("study_commands", "sweep"))
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
     """The errors a user's input or machine can cause: reported in one line, never a
     traceback. Every package's own error derives from ``MapUpdatingError``."""
-    from gridmap import MapUpdatingError
-
     # OSError: the machine's answer to a write or read (a full disk, a read-only folder, no
     # permission), which names the file; the user can act on it
     return (MapUpdatingError, OSError)
@@ -441,14 +255,18 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args([a for a in full[1:] if ":=" not in a])
     args.ros_argv = full
     try:
-        return args.func(args)
+        # the command's module is loaded only now: a robot's command never loads the testbed
+        module, name = args.command_at
+        return getattr(importlib.import_module(f"{__package__}.{module}"), name)(args)
     except KeyboardInterrupt:
         print("mapupdate: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - sorted into user errors and bugs just below
-        if args.debug or not isinstance(exc, _user_errors()):
+        missing = missing_extra(exc)
+        if args.debug or not (missing or isinstance(exc, _user_errors())):
             raise
-        print(f"mapupdate {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        message = missing or " ".join(str(exc).split())
+        print(f"mapupdate {args.command}: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -17,7 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import FREE, OCCUPIED, MapUpdatingError
+from gridmap import FREE, OCCUPIED, MapUpdatingError, load_map
+from gridmap.atomic import write_atomically, write_with
+from scenarios.report import _pyplot
+
 
 class StudyFolderError(MapUpdatingError, ValueError):
     """A folder that holds no study to summarise."""
@@ -36,8 +39,6 @@ KEY_COLUMNS = ("scenario", "seed", "method", "session")
 
 def _g_freed(run_dir: Path, previous: str, name: str) -> int:
     """Cells occupied in G_i that the method freed (free in M_i, not in M_{i-1})."""
-    from gridmap import load_map
-
     maps = run_dir / "maps"
     prev, upd = load_map(maps / f"M_{previous}.yaml").data, load_map(maps / f"M_{name}.yaml").data
     truth = load_map(maps / f"G_{name}.yaml").data
@@ -172,10 +173,6 @@ def _boxes(ax, rows: list[dict], grid: list[str], metric: str) -> None:
 
 def box_plot(rows: list[dict], grid: list[str], metrics, path: Path) -> None:
     """fig_<metric>.png for one metric, or side by side for several."""
-    from gridmap.atomic import write_with
-
-    from .report import _pyplot
-
     plt = _pyplot()
     metrics = [metrics] if isinstance(metrics, str) else list(metrics)
     n_boxes = len(_groups(rows, grid))
@@ -191,8 +188,6 @@ def box_plot(rows: list[dict], grid: list[str], metrics, path: Path) -> None:
 def summarise(out_dir) -> int:
     """Write results.csv, summary.md and fig_<metric>.png of the study in ``out_dir`` from its
     finished runs; returns how many runs had finished."""
-    from gridmap.atomic import write_atomically
-
     out_dir = Path(out_dir)
     rows, grid = collect(out_dir)
     write_atomically(out_dir / "results.csv", results_csv(rows, grid))

@@ -12,6 +12,11 @@ from dataclasses import dataclass, fields, replace
 
 from gridmap import MapUpdatingError
 from gridmap.suggest import did_you_mean
+from localization.confidence import PoseCheckConfig
+from updater import UpdaterConfig
+
+from ..methods import ROBOT_METHODS, check_method
+from ..robot_config import ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config, section_config
 
 
 class NodeSettingsError(MapUpdatingError, ValueError):
@@ -57,7 +62,6 @@ class NodeSettings:
         if not isinstance(self.use_pose_check, bool):
             raise NodeSettingsError(f"parameter '~use_pose_check' must be true or false, got "
                                     f"{self.use_pose_check!r}")
-        from ..methods import ROBOT_METHODS, check_method
 
         check_method(self.method, "parameter '~method'", ROBOT_METHODS)
 
@@ -67,11 +71,6 @@ def node_settings(params: dict, base=None):
     ``params`` laid key by key over ``base`` (a ``scenarios.robot_config.RobotConfig`` from the
     ``--config`` file, or None). A ``localizer`` section is accepted, for a file shared with
     ``mapupdate update``, and not used: the node takes its poses from tf."""
-    from localization.confidence import PoseCheckConfig
-    from updater import UpdaterConfig
-
-    from ..robot_config import (ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config,
-                                section_config)
 
     if not isinstance(params, dict):
         raise NodeSettingsError(f"private parameters must be a mapping, got {params!r}")

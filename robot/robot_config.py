@@ -24,6 +24,7 @@ from pathlib import Path
 
 from gridmap import MapUpdatingError
 from gridmap.config import check_keys
+from gridmap.files import FileInputError, load_yaml
 from gridmap.suggest import did_you_mean
 from localization import LocalizerConfig
 from localization.confidence import PoseCheckConfig
@@ -125,8 +126,6 @@ def section_config(name: str, values, source: str, where: str | None = None):
 
 
 def _read_yaml(path: Path):
-    from gridmap.files import FileInputError, load_yaml
-
     try:
         return load_yaml(path, "configuration file", ConfigError)
     except FileNotFoundError:

@@ -16,7 +16,7 @@ is. The baselines:
 ========  ===================================================================================
 name      what it does
 ========  ===================================================================================
-paper     the map updater of ALGORITHM.md (the default)
+paper     the map updater of docs/algorithm.md (the default)
 none      keeps M_{i-1}: what a robot without map updating does
 remap     a fresh log-odds map from the session's own scans and the localiser's poses
           (continuous re-mapping, which the paper sets out to avoid): what the session did not
@@ -42,15 +42,19 @@ mapping has none (the hybrid has the paper's, since the paper's updater runs ins
 from __future__ import annotations
 
 import math
-
 from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 
-from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D,
-                     PoseVerdict, Scan, Verdict)
+from evaluation.scores import near
+from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D, PoseVerdict,
+                     Scan)
+from gridmap.distance import distance_to_occupied
+from gridmap.mapping import LogOddsMapper, LogOddsParams
 from gridmap.suggest import did_you_mean
+from updater import BeamVerdict, MapUpdater, ScanReport, ScanStatus, UpdaterConfig
+from updater.gating import SKIPPED_OFF_MAP, Gate
 
 # The methods, the paper's first (the default).
 METHODS = ("paper", "none", "remap", "fuse", "hybrid")
@@ -79,8 +83,6 @@ def check_method(name, source: str = "method", choices=METHODS) -> str:
 def make_method(name: str, reference: OccupancyGrid, updater_config=None):
     """The method ``name`` on the reference map M_{i-1}. ``updater_config``: an
     ``updater.UpdaterConfig`` (None: its defaults); the baselines use its gating rules."""
-    from updater import MapUpdater, UpdaterConfig
-
     check_method(name)
     if name == "paper":
         return MapUpdater(reference, updater_config)
@@ -129,8 +131,6 @@ class GatedMethod(MapOutput):
     and the interface's bookkeeping. Subclasses define ``integrate`` and ``current``."""
 
     def __init__(self, reference: OccupancyGrid, config):
-        from updater.gating import Gate
-
         if not isinstance(reference, OccupancyGrid):
             raise MethodError(f"the reference map must be a gridmap.OccupancyGrid, got "
                               f"{type(reference).__name__}")
@@ -144,9 +144,6 @@ class GatedMethod(MapOutput):
     def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None,
                 pose_check: Callable[[], PoseVerdict] | None = None):
         """Gate, check the pose, then integrate the scan; the report as the updater's."""
-        from updater import ScanReport, ScanStatus
-        from updater.gating import SKIPPED_OFF_MAP
-
         self.stats["scans"] += 1
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry
@@ -155,10 +152,10 @@ class GatedMethod(MapOutput):
                                       math.degrees(scan.fov()))
             if reason:
                 self.stats["gated"] += 1
-                return ScanReport(t, ScanStatus.GATED, reason)
+                return ScanReport(t, ScanStatus.GATED, reason, sensor_pose=sensor_pose)
         if not self._on_map(sensor_pose):
             self.stats["skipped"] += 1
-            return ScanReport(t, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP)
+            return ScanReport(t, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP, sensor_pose=sensor_pose)
         verdict = PoseVerdict.accepted() if pose_check is None else pose_check()
         if verdict.is_refused:
             self.stats["skipped"] += 1
@@ -169,7 +166,7 @@ class GatedMethod(MapOutput):
         if self.config.gating:
             self._gate.mark_processed(t, gate_pose)
         valid = int(np.count_nonzero(np.isfinite(scan.ranges)))
-        return ScanReport(t, ScanStatus.PROCESSED, valid_beams=valid)
+        return ScanReport(t, ScanStatus.PROCESSED, valid_beams=valid, sensor_pose=pose)
 
     def state_bytes(self) -> int:
         return int(self._ref.nbytes)
@@ -199,8 +196,6 @@ class LogOddsMethod(GatedMethod):
     from M_{i-1}), both with ``gridmap.mapping.LogOddsMapper``'s increments and clamps."""
 
     def __init__(self, reference: OccupancyGrid, config, prior: bool):
-        from gridmap.mapping import LogOddsMapper
-
         super().__init__(reference, config)
         self.mapper = LogOddsMapper(reference)
         if prior:
@@ -240,9 +235,6 @@ class HybridMethod(MapOutput):
     """
 
     def __init__(self, reference: OccupancyGrid, config, radius: float = HYBRID_RADIUS):
-        from gridmap.mapping import LogOddsMapper, LogOddsParams
-        from updater import MapUpdater
-
         if isinstance(radius, bool) or not isinstance(radius, (int, float)) \
                 or not 0 < radius <= 5.0:
             raise MethodError(f"hybrid: radius must be a number in (0, 5] m, got {radius!r}")
@@ -261,21 +253,10 @@ class HybridMethod(MapOutput):
                 pose_check: Callable[[], PoseVerdict] | None = None):
         """The paper's updater on the scan (gate, pose check, lost check and all); a scan it
         processed and kept goes into the evidence at the pose it used."""
-        from updater import BEAM_CHANGE, ScanStatus
-
-        used = [sensor_pose]
-
-        def check() -> PoseVerdict:
-            verdict = pose_check()
-            if isinstance(verdict, PoseVerdict) and verdict.verdict is Verdict.REFINED:
-                used.append(verdict.sensor_pose)
-            return verdict
-
-        report = self.paper.process(scan, sensor_pose, odometry,
-                                    None if pose_check is None else check)
+        report = self.paper.process(scan, sensor_pose, odometry, pose_check)
         if report.status is ScanStatus.PROCESSED:
-            self.mapper.add_scan(self._within_range(scan), used[-1])
-            self._mark_hits(scan, used[-1], report.verdicts == BEAM_CHANGE)
+            self.mapper.add_scan(self._within_range(scan), report.sensor_pose)
+            self._mark_hits(scan, report.sensor_pose, report.verdicts == BeamVerdict.CHANGE)
             self._cache = None
         return report
 
@@ -297,9 +278,6 @@ class HybridMethod(MapOutput):
     def current(self) -> np.ndarray:
         """The map as it stands (computed when a scan was processed since the last call)."""
         if self._cache is None:
-            from evaluation.scores import near
-            from gridmap.distance import distance_to_occupied
-
             paper = self.paper.updated_map().data
             seeds = self._detected | (paper != self._ref)
             marks = OccupancyGrid(np.where(seeds, OCCUPIED, FREE).astype(np.int8), self._res,

@@ -27,8 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from gridmap import MapUpdatingError, OccupancyGrid, Pose2D
+from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, load_map, save_map
+from localization.confidence import PoseCheck
+from localization.smoothing import PoseSmoother
+from robotlogs.rosbag import scan_record, transform_pose
 
+from ..methods import make_method
+from ..pipeline import RobotPipeline
+from ..robot_config import load_robot_config
 from .grids import changed_box, grid_from_message, message_fields
 from .settings import NodeSettings, node_settings
 
@@ -114,11 +120,6 @@ class MapUpdaterNode:
     def _adopt(self, reference: OccupancyGrid) -> None:
         """Start afresh on ``reference``: new buffers, a new pose check (lock held or not
         needed)."""
-        from localization.confidence import PoseCheck
-        from localization.smoothing import PoseSmoother
-
-        from ..methods import make_method
-        from ..pipeline import RobotPipeline
 
         check = PoseCheck(reference, self.pose_check_config) \
             if self.settings.use_pose_check else None
@@ -172,8 +173,6 @@ class MapUpdaterNode:
             self.health.times.append(time.perf_counter() - t0)
 
     def _handle(self, msg, topic: str) -> None:
-        from robotlogs.rosbag import scan_record
-
         try:
             rec = scan_record(msg, topic)
         except MapUpdatingError as e:
@@ -213,8 +212,6 @@ class MapUpdaterNode:
         return map_odom.compose(odom), odom, mount
 
     def _lookup(self, parent: str, child: str, stamp) -> Pose2D:
-        from robotlogs.rosbag import transform_pose
-
         rospy = self.ros["rospy"]
         ts = self.tf.lookup_transform(parent, child, stamp,
                                       rospy.Duration(self.settings.tf_timeout))
@@ -294,8 +291,6 @@ class MapUpdaterNode:
 
     # --- services -----------------------------------------------------------------------------
     def _save(self, _req):
-        from gridmap import save_map
-
         with self._lock:
             if self.pipeline is None:
                 return self.ros["TriggerResponse"](False, "no reference map yet")
@@ -351,16 +346,28 @@ class MapUpdaterNode:
         self.ros["rospy"].loginfo(f"map_updater: {text}")
 
 
+def _require_master(wait: float = 3.0) -> None:
+    """Refuse to start, in one line, when no ROS master answers (rospy would end in a bare
+    "Connection refused", or wait for ever); a master starting at the same moment is given
+    ``wait`` seconds."""
+    import rosgraph
+
+    end = time.monotonic() + wait
+    while not rosgraph.is_master_online():
+        if time.monotonic() > end:
+            raise MapUpdatingError(f"no ROS master answers at {rosgraph.get_master_uri()}: "
+                                   "start one (roscore) or set ROS_MASTER_URI")
+        time.sleep(0.2)
+
+
 def run_node(map_path=None, config_path=None, argv=None) -> int:
     """``mapupdate ros1``: init the node, read its parameters, run until shut down."""
-    from gridmap import load_map
-
     r = _ros()
     rospy = r["rospy"]
-    from ..robot_config import load_robot_config
 
     base = load_robot_config(config_path)          # refused before anything starts
     reference = load_map(map_path) if map_path is not None else None
+    _require_master()
     rospy.init_node("map_updater", argv=argv)
     settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
     node = MapUpdaterNode(settings, updater_config, pose_check_config, reference)

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 from gridmap import MapUpdatingError
+from gridmap.map_io import read_map_yaml
 
 
 class OutputClash(MapUpdatingError, ValueError):
@@ -24,8 +25,6 @@ def map_files(yaml_path) -> list[Path]:
 def map_inputs(yaml_path) -> list[Path]:
     """The files a map_server map is read from: its YAML and the image it names (when the
     YAML can be read; otherwise loading it will say what is wrong)."""
-    from gridmap.map_io import read_map_yaml
-
     try:
         return [Path(yaml_path), read_map_yaml(yaml_path).image]
     except (MapUpdatingError, OSError):

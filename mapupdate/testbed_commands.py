@@ -1,0 +1,82 @@
+"""The commands of the simulated testbed: ``run``, ``render`` and ``generate``. Each first
+checks that the simulator extra is installed, before anything is read or written."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import sim
+from robot.methods import check_method
+from robot.outputs import OutputClash, check_outputs
+from robot.robot_config import load_robot_config
+from scenarios.catalog import HERE, find_scenario
+from scenarios.checkpoint import ResumeError
+from scenarios.generator import write_generated
+from scenarios.observers import Observers
+from scenarios.runner import RunOptions, run_scenario
+from scenarios.session_bags import SessionBagRecorder
+
+from .extras import require
+
+
+def render(args) -> int:
+    require("pymunk", "matplotlib")
+    path = find_scenario(args.scenario)
+    check_outputs({"scenario": [path]}, {"--out": [args.out]})
+    scenario = sim.load_scenario(path)
+    out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
+    print(f"wrote {out}")
+    return 0
+
+
+def run(args) -> int:
+    require("pymunk", "matplotlib", *(["rerun"] if args.rerun or args.rerun_spawn else []))
+    config = load_robot_config(args.config)     # refused before anything is written
+    check_method(args.method, "--method")
+    if args.resume is not None and args.out is not None and args.out != args.resume:
+        raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
+    observers = []
+    if args.bag is not None:
+        observers.append(SessionBagRecorder(args.bag, args.bag_format))
+    recorder = rerun_recorder(args) if args.rerun or args.rerun_spawn else None
+    if recorder is not None:
+        observers.append(recorder)
+    given = {} if args.pose_check is None else {"pose_check": args.pose_check}
+    opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
+                      quick=args.quick, progress=not args.no_progress,
+                      updater_config=config.updater, localizer_config=config.localizer,
+                      pose_check_config=config.pose_check,
+                      observer=Observers(*observers) if observers else None,
+                      resume=args.resume is not None, method=args.method, **given)
+    try:
+        result = run_scenario(args.scenario, opts)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    print(f"wrote {result.out_dir}/report.md and metrics.json")
+    if args.rerun:
+        print(f"wrote {args.rerun}: open it with `rerun {args.rerun}`")
+    return 0
+
+
+def rerun_recorder(args):
+    from scenarios.rerun_log import RerunRecorder, has_display  # rerun: an optional extra
+
+    spawn = args.rerun_spawn and has_display()
+    if args.rerun_spawn and not spawn:
+        print("mapupdate run: no display here, the viewer is not opened", file=sys.stderr)
+    return RerunRecorder(args.rerun, spawn=spawn) if args.rerun or spawn else None
+
+
+def generate(args) -> int:
+    require("pymunk")
+    out = Path(args.out)
+    if out.exists() and (out.is_dir() or out.resolve().parent == HERE):
+        # a folder, or one of the built-in scenarios this package ships
+        raise OutputClash(f"{out}: is {'a folder' if out.is_dir() else 'a built-in scenario'}; "
+                          "choose another --out")
+    path = write_generated(args.seed, args.out, size=tuple(args.size), sessions=args.sessions,
+                           fov=args.fov)
+    print(f"wrote {path}")
+    return 0

@@ -37,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_map(sub)
     _add_render(sub)
     _add_ros1(sub)
+    _add_ros2(sub)
     _add_generate(sub)
     _add_sweep(sub)
     _add_inject(sub)
@@ -198,6 +199,22 @@ def _add_ros1(sub) -> None:
     ros.set_defaults(command_at=("robot_commands", "ros1"))
 
 
+def _add_ros2(sub) -> None:
+    ros = sub.add_parser("ros2", help="run the live ROS 2 node (a lifecycle node, for Nav2)",
+                         description="The map updater as a ROS 2 lifecycle node: LaserScan, "
+                         "odometry and amcl's pose in, map_updated out. Everything after "
+                         "--ros-args is ROS's (-p name:=value, --params-file FILE, -r remaps).")
+    ros.add_argument("--map", type=Path, default=None,
+                     help="map_server YAML of the reference map (default: the transient-local "
+                          "'map' topic)")
+    ros.add_argument("--config", default=None,
+                     help="YAML with 'updater' and 'pose_check' sections; ROS parameters "
+                          "(updater.threshold, ...) override it")
+    ros.add_argument("--autostart", action="store_true",
+                     help="configure and activate at once (without a lifecycle manager)")
+    ros.set_defaults(command_at=("robot_commands", "ros2"))
+
+
 def _add_render(sub) -> None:
     ren = sub.add_parser("render", help="draw a session's world to a PNG")
     ren.add_argument("scenario", nargs="?", default=None,
@@ -251,8 +268,10 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 
 def main(argv: list[str] | None = None) -> int:
     full = sys.argv if argv is None else ["mapupdate", *map(str, argv)]
-    # ROS remappings and private parameters (``__name:=x``, ``_rate:=5``) are ROS's, not ours
-    args = build_parser().parse_args([a for a in full[1:] if ":=" not in a])
+    # ROS 2's arguments (after --ros-args) and ROS 1's remappings and private parameters
+    # (``__name:=x``, ``_rate:=5``) are ROS's, not ours
+    ours = full[1:full.index("--ros-args")] if "--ros-args" in full else full[1:]
+    args = build_parser().parse_args([a for a in ours if ":=" not in a])
     args.ros_argv = full
     try:
         # the command's module is loaded only now: a robot's command never loads the testbed

@@ -92,3 +92,9 @@ def score(args) -> int:
 def ros1(args) -> int:
     # an empty --config (a launch file's unset argument) means none
     return run_node(args.map, args.config or None, args.ros_argv)
+
+
+def ros2(args) -> int:
+    from robot.ros2.node import run_node as run_ros2_node    # rclpy: the [ros2] extra
+
+    return run_ros2_node(args.map, args.config or None, args.autostart, args.ros_argv)

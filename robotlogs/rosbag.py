@@ -190,7 +190,7 @@ def _records(msg, msgtype: str, topic: str, kind: str) -> Iterator[Record]:
     if kind == "scan":
         yield scan_record(msg, topic)
     elif kind == "odom":
-        yield OdomRecord(stamp_seconds(msg.header), _finite(_pose(msg.pose.pose), "pose"),
+        yield OdomRecord(stamp_seconds(msg.header), _finite(pose_pose(msg.pose.pose), "pose"),
                          _twist(msg.twist.twist), msg.header.frame_id, msg.child_frame_id, topic)
     elif kind in ("pose", "truth"):
         record = _pose_record(msg, msgtype, topic)
@@ -246,11 +246,12 @@ def _pose_record(msg, msgtype: str, topic: str) -> PoseRecord:
     if msgtype == POSE_COV:
         cov = np.asarray(msg.pose.covariance, np.float64).reshape(6, 6)[np.ix_(COV_INDEX,
                                                                                 COV_INDEX)]
-        return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id,
-                          cov)
+        return PoseRecord(stamp_seconds(msg.header), pose_pose(msg.pose.pose), topic,
+                          msg.header.frame_id, cov)
     if msgtype == ODOMETRY:
-        return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose.pose), topic, msg.header.frame_id)
-    return PoseRecord(stamp_seconds(msg.header), _pose(msg.pose), topic, msg.header.frame_id)
+        return PoseRecord(stamp_seconds(msg.header), pose_pose(msg.pose.pose), topic,
+                          msg.header.frame_id)
+    return PoseRecord(stamp_seconds(msg.header), pose_pose(msg.pose), topic, msg.header.frame_id)
 
 
 def stamp_seconds(header) -> float:
@@ -266,7 +267,8 @@ def _yaw(q) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
-def _pose(p) -> Pose2D:
+def pose_pose(p) -> Pose2D:
+    """A ``geometry_msgs/Pose`` as a 2D pose (x, y and the yaw of its orientation)."""
     return Pose2D(float(p.position.x), float(p.position.y), _yaw(p.orientation))
 
 

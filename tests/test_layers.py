@@ -16,7 +16,7 @@ PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlog
 
 @pytest.mark.parametrize("package", ["gridmap", "updater", "localization", "evaluation",
                                      "robotlogs", "robot", "robot.replay", "robot.logmap",
-                                     "robot.methods", "robot.ros1.node", "robot.ros1.settings"])
+                                     "robot.methods", "robot.ros1.node", "robot.ros_common.settings"])
 def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     code = (
         "import sys, importlib\n"
@@ -123,6 +123,7 @@ def test_command_line_starts_without_compiling_kernels():
 @pytest.mark.parametrize("front_end, modules", [
     ("gymnasium", ["scenarios/gym/__init__.py", "scenarios/gym/env.py"]),
     ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["robot/ros1/node.py"]),
+    ("rclpy", ["robot/ros2/node.py"]),
     ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"])])
 def test_each_optional_package_is_imported_in_one_place_only(front_end, modules):
     pattern = re.compile(rf"^\s*(import|from)\s+{front_end}\b", re.M)

@@ -35,8 +35,9 @@ from robotlogs.rosbag import scan_record, transform_pose
 from ..methods import make_method
 from ..pipeline import RobotPipeline
 from ..robot_config import load_robot_config
-from .grids import changed_box, grid_from_message, message_fields
-from .settings import NodeSettings, node_settings
+from ..ros_common.grids import changed_box, grid_from_message, message_fields
+from ..ros_common.health import Health, pipeline_values
+from ..ros_common.settings import NodeSettings, node_settings
 
 ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
                 "python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs "
@@ -59,43 +60,6 @@ def _ros():
             "DiagnosticStatus": DiagnosticStatus, "KeyValue": KeyValue,
             "OccupancyGridUpdate": OccupancyGridUpdate, "GridMsg": GridMsg,
             "LaserScan": LaserScan, "Trigger": Trigger, "TriggerResponse": TriggerResponse}
-
-
-class Health:
-    """Counters and per-scan times, for /diagnostics and the log."""
-
-    def __init__(self):
-        self.counts = collections.Counter()
-        self.skipped = collections.Counter()     # why scans or maps were not used
-        self.times: collections.deque = collections.deque(maxlen=500)   # [s] per scan
-
-    def values(self, pipeline_counts: dict) -> list[tuple[str, str]]:
-        """(key, value) pairs: the node's counters, then ``pipeline_counts`` (a dict value, as
-        ``gated_by``, one pair per entry: "gated_by: fast turn"), then what was skipped."""
-        t = np.asarray(self.times) * 1e3
-        out = [(k, str(v)) for k, v in sorted(self.counts.items())]
-        for k, v in pipeline_counts.items():
-            if isinstance(v, dict):
-                out += [(f"{k}: {name}", str(n)) for name, n in sorted(v.items())]
-            else:
-                out.append((k, str(v)))
-        out += [(f"skipped: {k}", str(v)) for k, v in sorted(self.skipped.items())]
-        if t.size:
-            out += [("scan_time_ms_mean", f"{t.mean():.3f}"), ("scan_time_ms_max",
-                                                              f"{t.max():.3f}")]
-        return out
-
-
-def pipeline_values(pipeline, method: str) -> dict:
-    """What /diagnostics shows of the pipeline: the method, its counters (the gate's refusals
-    by rule in ``gated_by``) and, for the paper's updater, the cells whose evidence of change
-    stayed below the threshold (``pending_cells``, of them ``pending_few_observations`` and
-    ``pending_outvoted``; counted over the whole map at each publication, as the map is)."""
-    out = {"method": method, **pipeline.counts.as_dict()}
-    evidence = getattr(pipeline.updater, "evidence_summary", None)
-    if evidence is not None:
-        out.update({k: v for k, v in evidence().items() if v is not None})
-    return out
 
 
 class MapUpdaterNode:

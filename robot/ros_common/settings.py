@@ -1,8 +1,8 @@
-"""The ROS 1 node's settings: its own parameters and the updater's and pose check's, read
-from the node's private parameters (``~updater/threshold``, ``~pose_check/max_gain``, ...)
-over an optional config file with the same sections. Unknown or misspelt names are refused
-at start with the nearest valid one, exactly as the YAML configs refuse them. No ROS import:
-the node hands in ``rospy.get_param("~")``.
+"""The live nodes' settings: their own parameters and the updater's and pose check's, read
+from the node's parameters (ROS 1: ``~updater/threshold``; ROS 2: ``updater.threshold``) over
+an optional config file with the same sections. Unknown or misspelt names are refused at start
+with the nearest valid one, exactly as the YAML configs refuse them. No ROS import: a node
+hands in its parameters as a nested dict.
 """
 
 from __future__ import annotations
@@ -66,15 +66,44 @@ class NodeSettings:
         check_method(self.method, "parameter '~method'", ROBOT_METHODS)
 
 
-def node_settings(params: dict, base=None):
-    """(NodeSettings, UpdaterConfig, PoseCheckConfig) from the node's private parameters
-    ``params`` laid key by key over ``base`` (a ``scenarios.robot_config.RobotConfig`` from the
-    ``--config`` file, or None). A ``localizer`` section is accepted, for a file shared with
-    ``mapupdate update``, and not used: the node takes its poses from tf."""
+@dataclass(frozen=True)
+class Ros2Settings(NodeSettings):
+    """The ROS 2 node's parameters: the ROS 1 node's, and where its poses come from. No wheel
+    carries tf2_msgs, so the node reads amcl's pose and the odometry, as amcl composes its
+    map -> odom, and takes the laser's mount on the robot from a parameter."""
+
+    odom_topic: str = "odom"             # nav_msgs/Odometry
+    pose_topic: str = "amcl_pose"        # geometry_msgs/PoseWithCovarianceStamped
+    laser_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)   # [m, m, rad] on base_frame
+    autostart: bool = False              # configure and activate at once (no lifecycle manager)
+
+    def __post_init__(self):
+        super().__post_init__()
+        for name in ("odom_topic", "pose_topic"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise NodeSettingsError(f"parameter '{name}' must be a non-empty string, got "
+                                        f"{getattr(self, name)!r}")
+        m = self.laser_mount
+        if not (isinstance(m, tuple) and len(m) == 3 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                and abs(v) <= 100 for v in m)):
+            raise NodeSettingsError(f"parameter 'laser_mount' must be three finite numbers "
+                                    f"[x, y, yaw] (m, m, rad; at most 100), got {m!r}")
+        if not isinstance(self.autostart, bool):
+            raise NodeSettingsError(f"parameter 'autostart' must be true or false, got "
+                                    f"{self.autostart!r}")
+
+
+def node_settings(params: dict, base=None, kind: type = NodeSettings):
+    """(settings, UpdaterConfig, PoseCheckConfig) from the node's parameters ``params`` laid
+    key by key over ``base`` (a ``robot.robot_config.RobotConfig`` from the ``--config`` file,
+    or None); ``kind``: ``NodeSettings`` (ROS 1) or ``Ros2Settings``. A ``localizer`` section is
+    accepted, for a file shared with ``mapupdate update``, and not used: the node takes its
+    poses from the robot's localisation."""
 
     if not isinstance(params, dict):
         raise NodeSettingsError(f"private parameters must be a mapping, got {params!r}")
-    own = [f.name for f in fields(NodeSettings)]
+    own = [f.name for f in fields(kind)]
     for key in params:
         if key not in own and key not in SECTIONS:
             raise NodeSettingsError(f"unknown parameter '~{key}'"
@@ -96,4 +125,6 @@ def node_settings(params: dict, base=None):
         mine["scan_topics"] = (topics,) if isinstance(topics, str) else tuple(topics)
     if isinstance(mine.get("publish_period"), int) and not isinstance(mine["publish_period"], bool):
         mine["publish_period"] = float(mine["publish_period"])
-    return replace(NodeSettings(), **mine), configs["updater"], configs["pose_check"]
+    if isinstance(mine.get("laser_mount"), list):
+        mine["laser_mount"] = tuple(mine["laser_mount"])
+    return replace(kind(), **mine), configs["updater"], configs["pose_check"]

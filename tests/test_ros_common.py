@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapUpdatingError, OccupancyGrid
-from robot.ros1.grids import changed_box, grid_from_message, message_fields
-from robot.ros1.settings import NodeSettings, NodeSettingsError, node_settings
+from robot.ros_common.grids import changed_box, grid_from_message, message_fields
+from robot.ros_common.settings import NodeSettings, NodeSettingsError, node_settings
 
 
 def test_defaults_are_rosy_and_sections_reach_the_configs():
@@ -119,7 +119,7 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     from robot.methods import make_method
     from robot.pipeline import RobotPipeline
     from robot.robot_config import ROBOT_UPDATER_DEFAULTS
-    from robot.ros1.node import Health, pipeline_values
+    from robot.ros_common.health import Health, pipeline_values
     from updater import UpdaterConfig
 
     try:

@@ -1,0 +1,220 @@
+"""The live ROS 2 node in a real ROS 2 graph (ROS 2 Jazzy's wheels in .venv-ros2, a domain of
+its own): a W2 recording replayed into it by a separate rclpy process gives the map `mapupdate
+update` makes of that recording, cell for cell; a subscriber of another DDS implementation
+(cyclonedds) that joins late receives the latched map; the lifecycle transitions in and out of
+order; commit, reset and a misspelt parameter. Skipped, with the reason, where the wheels
+cannot be had."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gridmap import load_map
+from mapupdate import main
+
+import ros2_tools
+
+pytestmark = pytest.mark.skipif(bool(ros2_tools.missing()),
+                                reason=ros2_tools.missing() or "-")
+NODE = "/map_updater"
+MOUNT = "laser_mount:=[0.25, 0.0, 0.0]"          # the simulated robot's lidar (its /tf_static)
+CONFIGURE, CLEANUP, ACTIVATE, DEACTIVATE = 1, 2, 3, 4   # lifecycle_msgs/msg/Transition
+
+
+@pytest.fixture(scope="module")
+def graph(tmp_path_factory):
+    g = ros2_tools.Graph(tmp_path_factory.mktemp("ros2"))
+    yield g
+    g.close()
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """W2 of the warehouse (quick route) as `mapupdate run --bag` writes it, and the map
+    `mapupdate update` makes of it."""
+    root = tmp_path_factory.mktemp("run")
+    assert main(["run", "--quick", "--sessions", "2", "--bag", str(root / "bags"), "--out",
+                 str(root / "run"), "--no-progress"]) == 0
+    assert main(["update", "--map", str(root / "run/maps/M_W1.yaml"), "--log",
+                 str(root / "bags/W2.bag"), "--out", str(root / "update.yaml"),
+                 "--no-progress"]) == 0
+    return root
+
+
+def transition(graph, node: str, transition_id: int) -> bool:
+    answer = graph.call(f"{node}/change_state", "lifecycle_msgs.srv.ChangeState",
+                        {"transition.id": transition_id})
+    return answer["success"]
+
+
+def state(graph, node: str) -> str:
+    return graph.call(f"{node}/get_state", "lifecycle_msgs.srv.GetState")["current_state"][
+        "label"]
+
+
+@pytest.fixture(scope="module")
+def replayed(graph, recording):
+    """The node on M1, W2 replayed into it at twice real time; the map it saved."""
+    save = graph.folder / "saved.yaml"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-p", MOUNT, "-p", f"save_path:={save}")
+    graph.wait_for_service(f"{NODE}/get_state")
+    assert state(graph, NODE) == "active"
+    graph.replay(recording / "bags/W2.bag", rate=2.0)
+    assert graph.call(f"{NODE}/save")["success"]
+    yield {"node": node, "saved": load_map(save).data}
+
+
+def test_the_node_saves_the_map_mapupdate_update_makes_of_the_same_recording(replayed,
+                                                                             recording):
+    expected = load_map(recording / "update.yaml").data
+    reference = load_map(recording / "run/maps/M_W1.yaml").data
+    assert (expected != reference).sum() > 300                  # W2 changed the map
+    assert np.array_equal(replayed["saved"], expected)          # cell for cell
+
+
+CYCLONE_READER = """
+import json, os, sys
+from dataclasses import dataclass
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import float32, float64, int8, int32, sequence, uint32
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+@dataclass
+class Time_(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+
+@dataclass
+class Header_(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time_
+    frame_id: str
+
+@dataclass
+class Point_(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: float64
+    y: float64
+    z: float64
+
+@dataclass
+class Quaternion_(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: float64
+    y: float64
+    z: float64
+    w: float64
+
+@dataclass
+class Pose_(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point_
+    orientation: Quaternion_
+
+@dataclass
+class MapMetaData_(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
+    map_load_time: Time_
+    resolution: float32
+    width: uint32
+    height: uint32
+    origin: Pose_
+
+@dataclass
+class OccupancyGrid_(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
+    header: Header_
+    info: MapMetaData_
+    data: sequence[int8]
+
+participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
+topic = Topic(participant, "rt/map_updated", OccupancyGrid_)
+qos = Qos(Policy.Durability.TransientLocal, Policy.Reliability.Reliable(duration(seconds=1)),
+          Policy.History.KeepLast(1))
+reader = DataReader(participant, topic, qos=qos)
+for grid in reader.take_iter(timeout=duration(seconds=30)):
+    info = grid.info
+    print(json.dumps({"frame": grid.header.frame_id, "width": info.width, "height": info.height,
+                      "resolution": info.resolution, "origin": [info.origin.position.x,
+                      info.origin.position.y], "data": list(grid.data)}))
+    break
+"""
+
+
+def test_a_late_subscriber_of_another_dds_gets_the_latched_updated_map(replayed, graph,
+                                                                      recording):
+    got = json.loads(graph.script(CYCLONE_READER, timeout=90).strip().splitlines()[-1])
+    reference = load_map(recording / "run/maps/M_W1.yaml")
+    h, w = reference.shape
+    assert (got["width"], got["height"], got["frame"]) == (w, h, "map")
+    assert got["resolution"] == pytest.approx(reference.resolution)
+    assert got["origin"] == pytest.approx(list(reference.origin))
+    cells = np.asarray(got["data"], np.int8).reshape(h, w)
+    assert np.array_equal(cells, replayed["saved"])             # the changed cells with it
+
+
+def test_reset_and_commit_do_what_they_say(replayed, graph, recording):
+    save = graph.folder / "saved.yaml"
+    reference = load_map(recording / "run/maps/M_W1.yaml").data
+    assert graph.call(f"{NODE}/reset")["success"]              # buffers cleared: M1 again
+    assert graph.call(f"{NODE}/save")["success"]
+    assert np.array_equal(load_map(save).data, reference)
+    assert graph.call(f"{NODE}/commit")["success"]             # now the reference
+    assert graph.call(f"{NODE}/save")["success"]
+    assert np.array_equal(load_map(save).data, reference)
+
+
+LIFECYCLE = """
+import json, sys
+import rclpy
+from lifecycle_msgs.srv import ChangeState, GetState
+node_name, steps = sys.argv[1], json.loads(sys.argv[2])
+rclpy.init()
+client = rclpy.create_node("lifecycle_client")
+change = client.create_client(ChangeState, f"/{node_name}/change_state")
+get = client.create_client(GetState, f"/{node_name}/get_state")
+assert change.wait_for_service(timeout_sec=60) and get.wait_for_service(timeout_sec=60)
+
+def call(c, request):
+    future = c.call_async(request)
+    rclpy.spin_until_future_complete(client, future, timeout_sec=30)
+    return future.result()
+
+out = [call(get, GetState.Request()).current_state.label]
+for transition_id in steps:
+    request = ChangeState.Request()
+    request.transition.id = transition_id
+    ok = call(change, request).success
+    out.append([ok, call(get, GetState.Request()).current_state.label])
+print(json.dumps(out))
+"""
+
+
+def test_lifecycle_transitions_in_order_and_out_of_order(graph, recording):
+    name = "lifecycle_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--ros-args", "-r",
+                      f"__node:={name}", "-p", MOUNT, name=name)
+    steps = [ACTIVATE, CONFIGURE, ACTIVATE, CONFIGURE, DEACTIVATE, CLEANUP, CONFIGURE]
+    seen = json.loads(graph.script(LIFECYCLE, name, json.dumps(steps)).strip().splitlines()[-1])
+    assert seen == ["unconfigured",
+                    [False, "unconfigured"],     # activate before configure: refused
+                    [True, "inactive"], [True, "active"],
+                    [False, "active"],           # configure while active: refused
+                    [True, "inactive"], [True, "unconfigured"],
+                    [True, "inactive"]]          # configured again after a cleanup
+    assert graph.stop(node) == 0
+    log = graph.log(name)
+    assert "refused: not available in state 'unconfigured'" in log and "Traceback" not in log
+
+
+def test_a_misspelt_parameter_fails_configure_with_the_nearest_name(graph, recording):
+    name = "typo_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", "-p", "updater.treshold:=5", name=name)
+    assert node.wait(90) == 2
+    log = graph.log(name)
+    assert "unknown key 'treshold'" in log and "did you mean 'threshold'" in log
+    assert "mapupdate ros2: error: the node did not come up (configure failed" in log
+    assert "Traceback" not in log

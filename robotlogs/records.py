@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gridmap import MapUpdatingError, Pose2D, Scan
+from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, Scan
 
 # How many problem messages a reader keeps verbatim; the rest are only counted.
 MAX_PROBLEMS = 20
@@ -74,7 +74,17 @@ class PoseRecord:
     covariance: np.ndarray | None = None
 
 
-Record = ScanRecord | OdomRecord | TransformRecord | PoseRecord
+@dataclass(frozen=True)
+class MapRecord:
+    """An occupancy grid as a map server publishes it (latched, in ``frame_id``)."""
+
+    time: float
+    grid: OccupancyGrid
+    topic: str = "/map"
+    frame_id: str = "map"
+
+
+Record = ScanRecord | OdomRecord | TransformRecord | PoseRecord | MapRecord
 
 
 @dataclass

@@ -23,13 +23,14 @@ import numpy as np
 from gridmap import Pose2D, Scan
 from gridmap.types import GridError
 
-from .records import LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRecord, \
-    TransformRecord
+from .records import (LogError, MapRecord, OdomRecord, PoseRecord, ReadStats, Record,
+                      ScanRecord, TransformRecord)
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+GRID = "nav_msgs/msg/OccupancyGrid"
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 POSE_TYPES = (POSE_COV, POSE_STAMPED, ODOMETRY)
 # The (x, y, yaw) entries of a row-major 6 x 6 ROS covariance (x y z roll pitch yaw).
@@ -365,6 +366,9 @@ class BagWriter:
             self._put(record.topic, ODOMETRY, record.time, self._odom_msg(record))
         elif isinstance(record, PoseRecord):
             self._put(record.topic, POSE_COV, record.time, self._pose_msg(record))
+        elif isinstance(record, MapRecord):
+            # latched (ROS 1) / transient local (ROS 2), as a map server offers it
+            self._put(record.topic, GRID, record.time, self._grid_msg(record), latched=True)
         else:
             raise LogError(f"cannot write a {type(record).__name__} to a bag")
 
@@ -446,6 +450,16 @@ class BagWriter:
             header=self._header(r.topic, r.time, r.frame_id),
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self._pose(r.pose),
                                                            covariance=cov.reshape(36)))
+
+    def _grid_msg(self, r: MapRecord):
+        T, grid = self._ts.types, r.grid
+        h, w = grid.shape
+        header = self._header(r.topic, r.time, r.frame_id)
+        origin = self._pose(Pose2D(float(grid.origin[0]), float(grid.origin[1]), 0.0))
+        info = T["nav_msgs/msg/MapMetaData"](map_load_time=header.stamp,
+                                             resolution=float(grid.resolution), width=int(w),
+                                             height=int(h), origin=origin)
+        return T[GRID](header=header, info=info, data=grid.data.reshape(-1).astype(np.int8))
 
     def _transform_msg(self, r: TransformRecord):
         T = self._ts.types

@@ -18,7 +18,7 @@ import shutil
 from pathlib import Path
 
 from gridmap import Pose2D
-from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
+from robotlogs.records import MapRecord, OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
 
 BAG_EPOCH = 1_700_000_000.0   # [s] the bags' clock at the start of session 0
@@ -60,6 +60,8 @@ class SessionBagRecorder:
         self._bag.write_transforms([
             TransformRecord(self._start, "base_link", lidar_frame(i), lidar.mount, static=True)
             for i, lidar in enumerate(scenario.robot.lidars)])
+        # the map the session starts from, as a map server would offer it to the robot
+        self._bag.write(MapRecord(self._start, previous))
 
     def scan(self, msg, estimate: Pose2D, report, world, updater, localizer) -> None:
         est = localizer.estimate()

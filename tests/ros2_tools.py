@@ -79,7 +79,7 @@ class Graph:
         self.call(service, "lifecycle_msgs.srv.GetState", timeout=timeout)
 
     def replay(self, bag: Path, rate: float) -> str:
-        p = subprocess.run([str(PYTHON), str(ROOT / "tests" / "ros2_replay.py"), str(bag),
+        p = subprocess.run([str(PYTHON), "-m", "robot.ros2.play", str(bag), "--rate",
                             str(rate)], env=self.env, capture_output=True, text=True,
                            timeout=1200, cwd=self.folder)
         assert p.returncode == 0, p.stderr[-3000:]

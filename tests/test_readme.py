@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 import ros1_tools
+import ros2_tools
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = re.compile(r"^### (?P<title>.+?)\n.*?^```(?P<lang>sh|python)\n(?P<code>.*?)^```",
@@ -32,12 +33,16 @@ def journeys(readme: str) -> list[tuple[str, str, str]]:
 
 
 def run_journeys(folder: Path, with_make: bool) -> dict[str, str]:
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    env.pop("ROS_MASTER_URI", None)
+    # a ROS 2 graph of the test's own, on this machine only
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "ROS_DOMAIN_ID": str(os.getpid() % 100 + 1),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    for var in ("ROS_MASTER_URI", "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "VIRTUAL_ENV"):
+        env.pop(var, None)
     out = {}
     for title, lang, code in journeys((ROOT / "README.md").read_text()):
-        if "ROS" in title and ros1_tools.missing():
-            continue                  # ROS 1 cannot be had here; its own tests say why
+        if "ROS 1" in title and ros1_tools.missing() or "ROS 2" in title and \
+                ros2_tools.missing():
+            continue                  # ROS cannot be had here; its own tests say why
         if lang == "python":
             cmd = [str(folder / ".venv/bin/python"), "-c", code]
         else:
@@ -69,6 +74,9 @@ def check_outputs(folder: Path, said: dict[str, str]) -> None:
     assert "removed" in scores and "added" in scores
     if not ros1_tools.missing():
         assert (runs / "live.yaml").exists()
+    if not ros2_tools.missing():
+        assert (runs / "live2.yaml").exists()
+        assert "success: saved" in said["Live on a ROS 2 robot: the lifecycle node, beside Nav2"]
 
 
 def test_the_readme_journeys_run_as_written(tmp_path):
@@ -76,6 +84,8 @@ def test_the_readme_journeys_run_as_written(tmp_path):
         if entry.name not in (".git", ".venv", "runs") and not entry.name.startswith("."):
             (tmp_path / entry.name).symlink_to(entry)
     (tmp_path / ".venv").symlink_to(Path(sys.prefix))
+    if (ROOT / ".venv-ros2").exists():
+        (tmp_path / ".venv-ros2").symlink_to(ROOT / ".venv-ros2")
     said = run_journeys(tmp_path, with_make=False)
     check_outputs(tmp_path, said)
 

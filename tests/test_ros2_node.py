@@ -218,3 +218,88 @@ def test_a_misspelt_parameter_fails_configure_with_the_nearest_name(graph, recor
     assert "unknown key 'treshold'" in log and "did you mean 'threshold'" in log
     assert "mapupdate ros2: error: the node did not come up (configure failed" in log
     assert "Traceback" not in log
+
+
+BAD_TRAFFIC = """
+import json, math, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+
+node_name = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("bad_traffic")
+latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+scans = node.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+odom = node.create_publisher(Odometry, "odom", 50)
+amcl = node.create_publisher(PoseWithCovarianceStamped, "amcl_pose", latched)
+seen = {}
+node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: seen.update(
+    {s.name: {v.key: v.value for v in s.values} | {"_level": int.from_bytes(s.level, "little")
+     if isinstance(s.level, bytes) else int(s.level)} for s in m.status}), 10)
+end = time.monotonic() + 60
+while min(p.get_subscription_count() for p in (scans, odom, amcl)) == 0:
+    rclpy.spin_once(node, timeout_sec=0.1)
+    assert time.monotonic() < end, "the node never subscribed"
+t0 = node.get_clock().now().nanoseconds / 1e9
+
+def stamped(msg, t):
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
+    return msg
+
+def scan(t, ranges, increment=0.01):
+    m = stamped(LaserScan(), t)
+    m.header.frame_id = "laser"
+    m.angle_min, m.angle_increment = -0.5, increment
+    m.angle_max = -0.5 + (len(ranges) - 1) * increment
+    m.range_min, m.range_max, m.ranges = 0.05, 20.0, ranges
+    return m
+
+def pose(msg, target, x):
+    target.position.x, target.orientation.w = x, 1.0
+    return msg
+
+a = stamped(PoseWithCovarianceStamped(), t0)
+amcl.publish(pose(a, a.pose.pose, 0.0))
+for _ in range(5):                         # the localisation first, as a robot has it
+    rclpy.spin_once(node, timeout_sec=0.1)
+bad_a = stamped(PoseWithCovarianceStamped(), t0 + 0.05)
+amcl.publish(pose(bad_a, bad_a.pose.pose, math.inf))             # a localisation of inf
+for k, t in enumerate((t0, t0 + 0.1, t0 + 0.2)):
+    o = stamped(Odometry(), t)
+    odom.publish(pose(o, o.pose.pose, 0.01 * k))
+bad_o = stamped(Odometry(), t0 + 0.15)
+odom.publish(pose(bad_o, bad_o.pose.pose, math.nan))             # odometry of NaN
+scans.publish(scan(t0 + 0.05, [1.0] * 101, increment=0.0))       # angles that go nowhere
+scans.publish(scan(t0 + 0.06, []))                               # no beams
+scans.publish(scan(t0 + 0.07, [math.nan] * 50 + [2.0] * 51))     # NaN beams: invalid, used
+o = stamped(Odometry(), t0 + 0.3)
+odom.publish(pose(o, o.pose.pose, 0.03))
+end = time.monotonic() + 30
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.2)
+    values = seen.get(f"/{node_name}: health", {})
+    if values.get("scans_received") == "3" and values.get("scans_used") == "1":
+        break
+print(json.dumps(values))
+"""
+
+
+def test_malformed_traffic_is_counted_and_skipped_never_a_crash(graph, recording):
+    name = "bad_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", "-p", MOUNT, "-p", "publish_period:=0.2",
+                      name=name)
+    values = json.loads(graph.script(BAD_TRAFFIC, name, timeout=120).strip().splitlines()[-1])
+    assert values["skipped: malformed scan"] == "1"
+    assert values["skipped: empty scan"] == "1"
+    assert values["skipped: odometry not finite"] == "1"
+    assert values["skipped: localisation not finite"] == "1"
+    assert values["scans_with_bad_ranges"] == "1" and values["scans_used"] == "1"
+    assert values["_level"] == 1                                  # WARN
+    assert node.poll() is None and graph.stop(node) == 0
+    assert "Traceback" not in graph.log(name)

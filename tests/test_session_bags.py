@@ -95,3 +95,27 @@ def test_ros2_bag_names_its_data_file_after_the_bag_not_the_partial_folder(bag_r
                      if t["topic_metadata"]["name"] == "/tf_static")
     assert "durability: 1" in str(tf_static["topic_metadata"]["offered_qos_profiles"])
     assert len([r for r in read_bag(bag, kinds=("scan",))]) > 10
+
+
+def test_bags_carry_the_sessions_map_latched_as_a_map_server_offers_it(bag_run):
+    import yaml
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    root, ros1, ros2 = bag_run
+    previous = load_map(root / "run" / "maps" / "M_W1.yaml")      # W2 starts from M1
+    for rec in (ros1, ros2):
+        assert bag_topics(rec.paths["W2"])["/map"] == "nav_msgs/msg/OccupancyGrid"
+        with AnyReader([rec.paths["W2"]],
+                       default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+            (conn,) = [c for c in reader.connections if c.topic == "/map"]
+            (_, _, raw), *rest = list(reader.messages(connections=[conn]))
+            grid = reader.deserialize(raw, conn.msgtype)
+        assert rest == [] and (grid.info.width, grid.info.height) == previous.shape[::-1]
+        assert grid.info.resolution == pytest.approx(previous.resolution)
+        assert np.array_equal(np.asarray(grid.data).reshape(previous.shape), previous.data)
+    info = yaml.safe_load((ros2.paths["W2"] / "metadata.yaml").read_text())
+    (topic,) = [t["topic_metadata"] for t in
+                info["rosbag2_bagfile_information"]["topics_with_message_count"]
+                if t["topic_metadata"]["name"] == "/map"]
+    assert "durability: 1" in str(topic["offered_qos_profiles"])     # transient local

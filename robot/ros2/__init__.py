@@ -1,3 +1,4 @@
-"""The live ROS 2 node (``mapupdate ros2``): a lifecycle node on the one robot pipeline.
-``node`` is the only module of the project that imports rclpy; ``parameters`` declares and
-validates its parameters."""
+"""The live ROS 2 node (``mapupdate ros2``): a lifecycle node on the one robot pipeline
+(``node``), its parameters (``parameters``), and two small tools for a machine without the
+``ros2`` command: ``play`` replays a recording into the graph, ``trigger`` calls the node's
+services. Only these three modules import rclpy."""

@@ -14,7 +14,6 @@ Poses: no wheel carries ``tf2_msgs``, so the node reads ``/amcl_pose`` with ``/o
 laser's mount from the ``laser_mount`` parameter. Each scan waits for odometry past its stamp,
 so it is placed exactly where ``mapupdate update`` places it in the recording.
 
-``node`` is the only module of the project that imports rclpy.
 """
 
 from __future__ import annotations
@@ -77,7 +76,7 @@ class MapUpdaterNode(LifecycleNode):
 
     def _reset_state(self) -> None:
         self.poses = LivePoses()
-        self._scans: list = []                  # (stamp, record) waiting for odometry
+        self._scans: list = []                  # (record, arrival) waiting for odometry
         self._published: np.ndarray | None = None
 
     # --- lifecycle ----------------------------------------------------------------------------
@@ -207,17 +206,19 @@ class MapUpdaterNode(LifecycleNode):
         if len(self._scans) >= self.settings.queue_size:
             self._scans.pop(0)
             self.health.counts["scans_dropped_behind"] += 1
-        self._scans.append(rec)
+        self._scans.append((rec, time.perf_counter()))
         self._drain()
 
     def _drain(self, force: bool = False) -> None:
         """Place and use every waiting scan the odometry has passed (all of them, ``force``,
         when the odometry has stopped for longer than ``tf_timeout``)."""
-        while self._scans and (force or self.poses.ready(self._scans[0].time)):
-            rec = self._scans.pop(0)
+        while self._scans and (force or self.poses.ready(self._scans[0][0].time)):
+            rec, arrival = self._scans.pop(0)
             t0 = time.perf_counter()
             self._use(rec)
-            self.health.times.append(time.perf_counter() - t0)
+            done = time.perf_counter()
+            self.health.times.append(done - t0)
+            self.health.latencies.append(done - arrival)
 
     def _use(self, rec) -> None:
         if self.pipeline is None:
@@ -240,9 +241,8 @@ class MapUpdaterNode(LifecycleNode):
 
     # --- output -------------------------------------------------------------------------------
     def _publish(self) -> None:
-        if self._scans and self.poses.newest_odom < self._scans[-1].time - \
-                self.settings.tf_timeout - self.settings.publish_period:
-            self._drain(force=True)             # odometry stopped: use what waits
+        if self._scans and time.perf_counter() - self._scans[0][1] > self.settings.tf_timeout:
+            self._drain(force=True)             # the odometry stopped: use what waits
         counts = {}
         if self.pipeline is not None:
             grid = self.pipeline.updater.updated_map()

@@ -15,6 +15,8 @@ class Health:
         self.counts = collections.Counter()
         self.skipped = collections.Counter()     # why scans or maps were not used
         self.times: collections.deque = collections.deque(maxlen=500)   # [s] per scan
+        # [s] from a scan's arrival to the end of its update (waiting for odometry included)
+        self.latencies: collections.deque = collections.deque(maxlen=2000)
 
     def values(self, pipeline_counts: dict) -> list[tuple[str, str]]:
         """(key, value) pairs: the node's counters, then ``pipeline_counts`` (a dict value, as
@@ -30,6 +32,10 @@ class Health:
         if t.size:
             out += [("scan_time_ms_mean", f"{t.mean():.3f}"), ("scan_time_ms_max",
                                                               f"{t.max():.3f}")]
+        if self.latencies:
+            lat = np.asarray(self.latencies) * 1e3
+            out += [("scan_latency_ms_p50", f"{np.percentile(lat, 50):.3f}"),
+                    ("scan_latency_ms_p99", f"{np.percentile(lat, 99):.3f}")]
         return out
 
 

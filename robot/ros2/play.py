@@ -1,13 +1,15 @@
-"""Replays a recording into a ROS 2 graph with rclpy, as a robot's drivers and amcl would send
-it: LaserScan on /scan (sensor-data QoS), Odometry on /odom, PoseWithCovarianceStamped on
-/amcl_pose (transient local, as Nav2's amcl), in the recording's time order, at ``rate`` times
-real time, with the recording's stamps. Run by the ROS 2 tests in .venv-ros2:
+"""Replays a recording into a ROS 2 graph, as a robot's drivers and amcl would send it, for a
+machine without ``ros2 bag``: LaserScan on /scan (sensor-data QoS), Odometry on /odom,
+PoseWithCovarianceStamped on /amcl_pose (transient local, as Nav2's amcl), in the recording's
+time order, at ``--rate`` times real time, with the recording's stamps. It starts once every
+topic has a subscriber (a scan sent before would be lost).
 
-    python tests/ros2_replay.py BAG RATE
+    python -m robot.ros2.play BAG [--rate 1]
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import time
@@ -93,4 +95,9 @@ def main(bag: str, rate: float) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1], float(sys.argv[2])))
+    ap = argparse.ArgumentParser(prog="python -m robot.ros2.play",
+                                 description="replay a recording into a ROS 2 graph")
+    ap.add_argument("bag", help="ROS 1 bag or ROS 2 bag folder")
+    ap.add_argument("--rate", type=float, default=1.0, help="times real time (1)")
+    a = ap.parse_args()
+    sys.exit(main(a.bag, a.rate))

@@ -1,0 +1,38 @@
+"""Calls a ``std_srvs/Trigger`` service (the node's ``~/save``, ``~/commit``, ``~/reset``) and
+prints its answer, for a machine without the ``ros2`` command; exit 1 when it says no.
+
+    python -m robot.ros2.trigger /map_updater/save
+"""
+
+from __future__ import annotations
+
+import sys
+
+import rclpy
+from std_srvs.srv import Trigger
+
+
+def call(service: str, timeout: float = 30.0) -> tuple[bool, str]:
+    rclpy.init()
+    node = rclpy.create_node("trigger_client")
+    try:
+        client = node.create_client(Trigger, service)
+        if not client.wait_for_service(timeout_sec=timeout):
+            return False, f"no service {service} within {timeout:g} s"
+        future = client.call_async(Trigger.Request())
+        rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+        answer = future.result()
+        if answer is None:
+            return False, f"{service} did not answer within {timeout:g} s"
+        return answer.success, answer.message
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: python -m robot.ros2.trigger SERVICE")
+    ok, message = call(sys.argv[1])
+    print(f"{'success' if ok else 'failed'}: {message}")
+    sys.exit(0 if ok else 1)

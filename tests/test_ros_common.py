@@ -1,4 +1,4 @@
-"""The ROS 1 node's parameters and grid conversions, without ROS."""
+"""What the ROS 1 and ROS 2 nodes share (parameters, grid messages, health), without ROS."""
 
 from types import SimpleNamespace as NS
 
@@ -7,7 +7,8 @@ import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapUpdatingError, OccupancyGrid
 from robot.ros_common.grids import changed_box, grid_from_message, message_fields
-from robot.ros_common.settings import NodeSettings, NodeSettingsError, node_settings
+from robot.ros_common.settings import (NodeSettings, NodeSettingsError, Ros2Settings,
+                                       node_settings, refuse_saving_over_the_map)
 
 
 def test_defaults_are_rosy_and_sections_reach_the_configs():
@@ -153,3 +154,46 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     own = values["paper's own"]                 # the authors' gate; flags not counted
     assert (own["gated_by: interval"], own["gated_by: no motion"]) == ("2", "7")
     assert int(own["pending_cells"]) == pending and "pending_few_observations" not in own
+
+
+def test_a_topic_named_twice_is_one_subscription_and_bad_names_are_refused():
+    settings, _, _ = node_settings({"scan_topics": ["scan", "scan", "/front/scan"]})
+    assert settings.scan_topics == ("scan", "/front/scan")
+    for params, name in (({"scan_topics": ["sc an"]}, "scan_topics"),
+                         ({"scan_topics": ["1scan"]}, "scan_topics"),
+                         ({"scan_topics": ["a//b"]}, "scan_topics"),
+                         ({"map_topic": "map/"}, "map_topic")):
+        with pytest.raises(NodeSettingsError, match=f"'~{name}': .* is not a valid ROS topic"):
+            node_settings(params)
+    ros2, _, _ = node_settings({"pose_topic": "~/amcl_pose"}, None, Ros2Settings)
+    assert ros2.pose_topic == "~/amcl_pose"
+    with pytest.raises(NodeSettingsError, match="'~odom_topic'"):
+        node_settings({"odom_topic": "odom topic"}, None, Ros2Settings)
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"resolution": 1e-30}, "resolution must be in"),
+    ({"resolution": 1e30}, "resolution must be in"),
+    ({"resolution": float("nan")}, "resolution must be in"),
+    ({"width": 8100, "height": 8100}, "more than the 64000000 cells"),
+    ({"origin": (1e9, 0.0)}, "origin must lie within")])
+def test_a_map_message_meets_the_limits_of_a_map_file(change, words):
+    msg = msg_of(OccupancyGrid.empty(4, 3, 0.05))
+    for key, value in change.items():
+        if key == "origin":
+            msg.info.origin.position.x, msg.info.origin.position.y = value
+        else:
+            setattr(msg.info, key, value)
+    with pytest.raises(GridError, match=words):
+        grid_from_message(msg)
+
+
+def test_saving_over_the_input_map_is_refused_at_start(tmp_path):
+    from gridmap import save_map
+
+    save_map(OccupancyGrid.empty(4, 3, 0.05), tmp_path / "m.yaml")
+    for clash in ("m.yaml", "m.pgm"):
+        with pytest.raises(MapUpdatingError, match="input --map"):
+            refuse_saving_over_the_map(str(tmp_path / clash), tmp_path / "m.yaml")
+    refuse_saving_over_the_map(str(tmp_path / "other.yaml"), tmp_path / "m.yaml")
+    refuse_saving_over_the_map(str(tmp_path / "m.yaml"), None)      # the map from its topic

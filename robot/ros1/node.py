@@ -37,7 +37,7 @@ from ..pipeline import RobotPipeline
 from ..robot_config import load_robot_config
 from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
-from ..ros_common.settings import NodeSettings, node_settings
+from ..ros_common.settings import NodeSettings, node_settings, refuse_saving_over_the_map
 
 ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
                 "python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs "
@@ -334,6 +334,7 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
     _require_master()
     rospy.init_node("map_updater", argv=argv)
     settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
+    refuse_saving_over_the_map(settings.save_path, map_path)
     node = MapUpdaterNode(settings, updater_config, pose_check_config, reference)
     node.start(subscribe_map=reference is None)
     source = f"map {map_path}" if map_path else f"waiting for {settings.map_topic}"

@@ -35,7 +35,7 @@ from ..robot_config import load_robot_config
 from ..ros_common.grids import grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
 from ..ros_common.poses import LivePoses
-from ..ros_common.settings import Ros2Settings, node_settings
+from ..ros_common.settings import Ros2Settings, node_settings, refuse_saving_over_the_map
 from .parameters import declare_all, overrides_as_dict
 
 WHEELS = ("ros-jazzy-rclpy ros-jazzy-rmw-fastrtps-cpp ros-jazzy-nav-msgs "
@@ -97,6 +97,7 @@ class MapUpdaterNode(LifecycleNode):
             params = overrides_as_dict(self)
             self.settings, self.updater_config, self.pose_check_config = node_settings(
                 params, base, Ros2Settings)
+            refuse_saving_over_the_map(self.settings.save_path, self.map_path)
             declare_all(self, self.settings, self.updater_config, self.pose_check_config)
             reference = load_map(self.map_path) if self.map_path is not None else None
         except (MapUpdatingError, OSError) as e:

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid
+from gridmap.map_io import MAX_CELLS, MAX_ORIGIN, MAX_RESOLUTION, MIN_RESOLUTION
 
 # nav_msgs/OccupancyGrid holds probabilities 0-100 and -1; map_server publishes 0 / 100 / -1.
 # Other publishers' probabilities are read with map_server's default thresholds.
@@ -21,6 +22,17 @@ def grid_from_message(msg) -> OccupancyGrid:
     (a rotated origin, a data length that is not width x height, a bad resolution)."""
     info = msg.info
     w, h, res = int(info.width), int(info.height), float(info.resolution)
+    # the limits of a map file (gridmap.map_io), so a message cannot bring what a file could not
+    if not (math.isfinite(res) and MIN_RESOLUTION <= res <= MAX_RESOLUTION):
+        raise GridError(f"map resolution must be in [{MIN_RESOLUTION:g}, {MAX_RESOLUTION:g}] "
+                        f"m/cell, got {res!r}")
+    if w * h > MAX_CELLS:
+        raise GridError(f"map of {w} x {h} cells: more than the {MAX_CELLS} cells a map can "
+                        "have")
+    ox, oy = float(info.origin.position.x), float(info.origin.position.y)
+    if not (math.isfinite(ox) and math.isfinite(oy)) or max(abs(ox), abs(oy)) > MAX_ORIGIN:
+        raise GridError(f"map origin must lie within {MAX_ORIGIN:g} m of 0, got ({ox!r}, "
+                        f"{oy!r})")
     q = info.origin.orientation
     yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
     if abs(yaw) > 1e-9:
@@ -32,8 +44,7 @@ def grid_from_message(msg) -> OccupancyGrid:
     cells = np.full(data.shape, UNKNOWN, np.int8)
     cells[(data >= 0) & (data <= FREE_UP_TO)] = FREE
     cells[data >= OCCUPIED_FROM] = OCCUPIED
-    origin = (float(info.origin.position.x), float(info.origin.position.y))
-    return OccupancyGrid(cells.reshape(h, w), res, origin)
+    return OccupancyGrid(cells.reshape(h, w), res, (ox, oy))
 
 
 def message_fields(grid: OccupancyGrid) -> dict:

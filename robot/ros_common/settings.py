@@ -8,6 +8,7 @@ hands in its parameters as a nested dict.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, fields, replace
 
 from gridmap import MapUpdatingError
@@ -16,7 +17,13 @@ from localization.confidence import PoseCheckConfig
 from updater import UpdaterConfig
 
 from ..methods import ROBOT_METHODS, check_method
+from ..outputs import check_outputs, map_files, map_inputs
 from ..robot_config import ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config, section_config
+
+
+# A ROS topic name (ROS 1 and 2 agree on these): relative, absolute or private
+TOPIC_NAME = re.compile(r"[~/]?/?[A-Za-z][A-Za-z0-9_/]*")
+TOPIC_FIELDS = ("map_topic", "odom_topic", "pose_topic")
 
 
 class NodeSettingsError(MapUpdatingError, ValueError):
@@ -48,6 +55,12 @@ class NodeSettings:
         if not self.scan_topics or not all(isinstance(t, str) and t for t in self.scan_topics):
             raise NodeSettingsError(f"parameter '~scan_topics' must name one or more topics, "
                                     f"got {list(self.scan_topics)!r}")
+        for name, topic in [("scan_topics", t) for t in self.scan_topics] + \
+                [(n, getattr(self, n)) for n in TOPIC_FIELDS if hasattr(self, n)]:
+            if not TOPIC_NAME.fullmatch(topic) or "//" in topic or topic.endswith("/"):
+                raise NodeSettingsError(f"parameter '~{name}': {topic!r} is not a valid ROS "
+                                        "topic name (letters, digits, _ and /, starting with a "
+                                        "letter, / or ~)")
         for name, low, high in (("publish_period", 0.01, 3600.0), ("tf_timeout", 0.0, 10.0),
                                 ("smooth_poses", 0.0, 60.0)):
             v = getattr(self, name)
@@ -122,9 +135,18 @@ def node_settings(params: dict, base=None, kind: type = NodeSettings):
     mine = {k: v for k, v in params.items() if k in own}
     if isinstance(mine.get("scan_topics"), (str, list)):
         topics = mine["scan_topics"]
-        mine["scan_topics"] = (topics,) if isinstance(topics, str) else tuple(topics)
+        # a topic named twice is one subscription, not every scan taken twice
+        mine["scan_topics"] = (topics,) if isinstance(topics, str) else \
+            tuple(dict.fromkeys(topics))
     if isinstance(mine.get("publish_period"), int) and not isinstance(mine["publish_period"], bool):
         mine["publish_period"] = float(mine["publish_period"])
     if isinstance(mine.get("laser_mount"), list):
         mine["laser_mount"] = tuple(mine["laser_mount"])
     return replace(kind(), **mine), configs["updater"], configs["pose_check"]
+
+
+def refuse_saving_over_the_map(save_path: str, map_path) -> None:
+    """A node's ``save_path`` may not be its input map (the YAML or the image it names): saving
+    would overwrite the map the node started from. Refused at start."""
+    if map_path is not None:
+        check_outputs({"--map": map_inputs(map_path)}, {"~save_path": map_files(save_path)})

@@ -359,9 +359,13 @@ def _note_pose(out: Replay, obs: Observation, step: Step) -> None:
 
 
 def _check_placed(pipeline: RobotPipeline, replay: Replay, found, log_path) -> None:
-    """Refuse a replay that placed no scan at all: every scan without a pose, or a global
-    localisation that never settled (then nothing is written)."""
+    """Refuse a replay that placed no scan at all: no usable scan in the log, every scan
+    without a pose, or a global localisation that never settled (then nothing is written)."""
     c = pipeline.counts
+    if c.scans == 0:        # nothing usable: an error, not an unchanged map written
+        raise LogError(f"{log_path}: no usable scan ({replay.read} read"
+                       f"{', none in the time window asked for' if replay.read else ''}); "
+                       f"{found.stats.summary()}")
     if c.scans and c.scans == c.scans_without_pose:
         raise LogError(f"{log_path}: no scan could be placed ({replay.read} read, "
                        f"{c.scans_without_pose} without a pose); {found.stats.summary()}")

@@ -259,8 +259,7 @@ def load_session(out_dir, name: str, previous: str | None = None):
         res.previous = load_map(maps / f"M_{previous}.yaml")
         res.oracle = load_map(maps / f"oracle_{name}.yaml")
         res.trajectory = _trajectory(state_dir(out_dir) / f"session_{name}.npz", Trajectory)
-        with np.load(maps / f"masks_{name}.npz") as z:
-            res.masks = {k: z[k] for k in z.files}
+        res.masks = _arrays(maps / f"masks_{name}.npz")
     return res
 
 
@@ -277,11 +276,30 @@ def restore_session_outputs(out_dir, names: list[str]) -> list[str]:
     return written
 
 
+def _arrays(path: Path, keys: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """The arrays of a run's ``.npz`` file, never its pickled objects; a file that is not what
+    the run wrote (truncated, overwritten, pickled, lacking ``keys``) is a ``ResumeError``
+    naming it."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    # zipfile, zlib and numpy's header parser raise many kinds of error for damaged bytes
+    except Exception as e:  # noqa: BLE001
+        raise ResumeError(f"{path}: not a file this run wrote ({type(e).__name__}: "
+                          f"{' '.join(str(e).split())[:200]}); the run cannot be resumed "
+                          "from it") from None
+    missing = [k for k in keys if k not in arrays]
+    if missing:
+        raise ResumeError(f"{path}: lacks {', '.join(missing)}; the run cannot be resumed "
+                          "from it")
+    return arrays
+
+
 def _trajectory(path: Path, cls):
-    with np.load(path) as z:
-        traj = cls()
-        traj.time = list(z["time"])
-        traj.true = list(z["true"])
-        traj.previous_map = list(z["previous_map"])
-        traj.initial_map = list(z["initial_map"])
+    z = _arrays(path, ("time", "true", "previous_map", "initial_map"))
+    traj = cls()
+    traj.time = list(z["time"])
+    traj.true = list(z["true"])
+    traj.previous_map = list(z["previous_map"])
+    traj.initial_map = list(z["initial_map"])
     return traj

@@ -22,6 +22,7 @@ from localization import MonteCarloLocalizer
 from localization.confidence import PoseCheck
 from robotlogs.carmen import parse_carmen
 from robotlogs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
+from mapupdate import main
 from mapupdate.summaries import update_lines as summary_lines
 from robot.replay import LogSource, Outputs, update_from_log
 from robotlogs.rosbag import BagWriter, read_bag, write_bag
@@ -263,6 +264,33 @@ def test_replay_with_every_pose_off_the_map_skips_and_keeps_the_map(tmp_path):
     assert s["scans_used"] == 20 and s["scans_processed"] == 0
     assert s["cells_freed"] == s["cells_occupied"] == 0
     assert (load_map(tmp_path / "out.yaml").data == ref.data).all()
+
+
+def test_a_log_with_no_usable_scan_is_an_error_and_writes_nothing(tmp_path, capsys):
+    _, ref = room()
+    save_map(ref, tmp_path / "m.yaml")
+    bad = [f"FLASER 180 {' '.join(['3.0'] * 90)} 90.0 90.0 0.0 90.0 90.0 0.0 {k:.1f} h 0"
+           for k in range(10)]                  # 90 readings where 180 are announced
+    (tmp_path / "bad.log").write_text("\n".join(bad) + "\n")
+    assert main(["update", "--map", str(tmp_path / "m.yaml"), "--log",
+                 str(tmp_path / "bad.log"), "--out", str(tmp_path / "out.yaml"),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mapupdate update: error:") and "\n" not in err
+    assert "no usable" in err and "FLASER declares 180 ranges" in err
+    assert not (tmp_path / "out.yaml").exists() and not (tmp_path / "out.pgm").exists()
+
+
+def test_no_scan_in_the_time_window_is_an_error_not_an_unchanged_map(tmp_path):
+    _, ref = room()
+    save_map(ref, tmp_path / "m.yaml")
+    lines = [f"FLASER 180 {' '.join(['3.0'] * 180)} 5.0 5.0 0.0 5.0 5.0 0.0 {k * 0.5:.1f} h 0"
+             for k in range(10)]
+    (tmp_path / "ok.log").write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogError, match=r"no usable scan \(10 read, none in the time window"):
+        update_from_log(tmp_path / "m.yaml", LogSource(tmp_path / "ok.log", start_time=100.0),
+                        Outputs(tmp_path / "out.yaml"))
+    assert not (tmp_path / "out.yaml").exists()
 
 
 # --- time going backwards or repeating ------------------------------------------------------

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gridmap import load_map, map_io
@@ -137,3 +138,32 @@ def test_a_finished_run_resumed_only_rewrites_its_reports(tmp_path, uninterrupte
     assert time.perf_counter() - t0 < 15            # no session is played again
     assert (tmp_path / "run" / "report.md").exists() and len(result.sessions) == SESSIONS
     assert_same_run(tmp_path / "run", uninterrupted)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "pickled"])
+@pytest.mark.parametrize("victim", ["maps/masks_W2.npz", "state/session_W2.npz"])
+def test_a_damaged_array_file_is_one_line_and_nothing_is_overwritten(tmp_path, uninterrupted,
+                                                                    capsys, victim, damage):
+    import hashlib
+    import shutil
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(uninterrupted, run_dir)
+    # W2's figures gone, as an earlier version left them: the resume reads W2 back to draw them
+    (run_dir / "fig_maps_W2.png").unlink()
+    path = run_dir / victim
+    if damage == "garbage":
+        path.write_bytes(b"PK\x03\x04 not a zip at all" * 10)
+    elif damage == "truncated":
+        path.write_bytes(path.read_bytes()[:300])
+    else:
+        np.savez(path.with_suffix(""), time=np.array([{"a": 1}], dtype=object))
+    before = {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in run_dir.rglob("*")
+              if p.is_file() and p.name != "lock"}
+    assert cli.main(["run", "--resume", str(run_dir), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mapupdate run: error:") and "\n" not in err
+    assert victim.split("/")[1] in err and "cannot be resumed" in err
+    after = {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in run_dir.rglob("*")
+             if p.is_file() and p.name != "lock"}
+    assert {p: h for p, h in after.items() if p in before} == before

@@ -30,13 +30,14 @@ import numpy as np
 from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, load_map, save_map
 from localization.confidence import PoseCheck
 from localization.smoothing import PoseSmoother
-from robotlogs.rosbag import scan_record, transform_pose
+from robotlogs.rosbag import transform_pose
 
 from ..methods import make_method
 from ..pipeline import RobotPipeline
 from ..robot_config import load_robot_config
 from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
+from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import NodeSettings, node_settings, refuse_saving_over_the_map
 
 ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
@@ -137,15 +138,10 @@ class MapUpdaterNode:
             self.health.times.append(time.perf_counter() - t0)
 
     def _handle(self, msg, topic: str) -> None:
-        try:
-            rec = scan_record(msg, topic)
-        except MapUpdatingError as e:
-            return self._skip("malformed scan", e)
-        if rec.scan.beams == 0:
-            return self._skip("empty scan", topic)
-        with np.errstate(invalid="ignore"):
-            bad = int(np.count_nonzero(~(rec.scan.ranges >= 0)))   # NaN and negative
-        if bad:
+        rec, skip = usable_scan(msg, topic)
+        if skip is not None:
+            return self._skip(*skip)
+        if has_bad_ranges(rec):
             self.health.counts["scans_with_bad_ranges"] += 1   # those beams are invalid
         if self.pipeline is None:
             return self._skip("no reference map yet", topic)

@@ -27,7 +27,7 @@ import numpy as np
 from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, load_map, save_map
 from localization.confidence import PoseCheck
 from localization.smoothing import PoseSmoother
-from robotlogs.rosbag import pose_pose, scan_record, stamp_seconds
+from robotlogs.rosbag import pose_pose, stamp_seconds
 
 from ..methods import make_method
 from ..pipeline import RobotPipeline
@@ -35,6 +35,7 @@ from ..robot_config import load_robot_config
 from ..ros_common.grids import grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
 from ..ros_common.poses import LivePoses
+from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import Ros2Settings, node_settings, refuse_saving_over_the_map
 from .parameters import declare_all, overrides_as_dict
 
@@ -198,12 +199,9 @@ class MapUpdaterNode(LifecycleNode):
 
     def _on_scan(self, msg, topic: str) -> None:
         self.health.counts["scans_received"] += 1
-        try:
-            rec = scan_record(msg, topic)
-        except MapUpdatingError as e:
-            return self._skip("malformed scan", e)
-        if rec.scan.beams == 0:
-            return self._skip("empty scan", topic)
+        rec, skip = usable_scan(msg, topic)
+        if skip is not None:
+            return self._skip(*skip)
         if len(self._scans) >= self.settings.queue_size:
             self._scans.pop(0)
             self.health.counts["scans_dropped_behind"] += 1
@@ -224,9 +222,8 @@ class MapUpdaterNode(LifecycleNode):
     def _use(self, rec) -> None:
         if self.pipeline is None:
             return self._skip("no reference map yet", rec.topic)
-        with np.errstate(invalid="ignore"):
-            if np.any(~(rec.scan.ranges >= 0)):
-                self.health.counts["scans_with_bad_ranges"] += 1
+        if has_bad_ranges(rec):
+            self.health.counts["scans_with_bad_ranges"] += 1
         robot, odom = self.poses.at(rec.time)
         if robot is None:
             return self._skip("no localisation or odometry at the scan's time", rec.time)

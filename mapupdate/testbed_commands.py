@@ -24,6 +24,9 @@ def render(args) -> int:
     require("pymunk", "matplotlib")
     path = find_scenario(args.scenario)
     check_outputs({"scenario": [path]}, {"--out": [args.out]})
+    if not Path(args.out).parent.is_dir():
+        raise OutputClash(f"--out {args.out}: the folder {Path(args.out).parent} does not "
+                          "exist; make it first")
     scenario = sim.load_scenario(path)
     out = sim.render_world(scenario, args.session, args.out, seed=args.seed, time=args.time)
     print(f"wrote {out}")
@@ -36,6 +39,7 @@ def run(args) -> int:
     check_method(args.method, "--method")
     if args.resume is not None and args.out is not None and args.out != args.resume:
         raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
+    _check_run_outputs(args)
     observers = []
     if args.bag is not None:
         observers.append(SessionBagRecorder(args.bag, args.bag_format))
@@ -58,6 +62,24 @@ def run(args) -> int:
     if args.rerun:
         print(f"wrote {args.rerun}: open it with `rerun {args.rerun}`")
     return 0
+
+
+def _check_run_outputs(args) -> None:
+    """Before anything is written: a new run's folder is new or empty (never a folder holding
+    other files), and the recording goes over none of the run's inputs (the scenario, the
+    configuration, a resumed run's state)."""
+    if args.resume is None and args.out is not None and Path(args.out).is_dir():
+        others = sorted(p.name for p in Path(args.out).iterdir())
+        if others and not (Path(args.out) / "state").is_dir():    # a run's: the run decides
+            raise OutputClash(f"--out {args.out}: holds other files ({', '.join(others[:3])}"
+                              f"{', ...' if len(others) > 3 else ''}); a run goes into a new "
+                              "or empty folder")
+    if args.rerun is not None:
+        inputs = {"scenario": [find_scenario(args.scenario)],
+                  "--config": [args.config] if args.config else []}
+        if args.resume is not None and (Path(args.resume) / "state").is_dir():
+            inputs["--resume"] = [p for p in (Path(args.resume) / "state").iterdir()]
+        check_outputs(inputs, {"--rerun": [args.rerun]})
 
 
 def rerun_recorder(args):

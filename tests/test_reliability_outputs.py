@@ -1,0 +1,53 @@
+"""Outputs of the testbed's commands: never over an input, never into a folder that holds
+other files, never a folder made where the user named none. Each refusal is one line and
+exit 2, with every input as it was."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from mapupdate import main
+from scenarios.catalog import find_scenario
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def one_line_error(capsys, command: str, *words: str) -> None:
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"mapupdate {command}: error:") and "\n" not in err, err
+    for w in words:
+        assert w in err, err
+
+
+def test_a_run_never_goes_into_a_folder_holding_other_files(tmp_path, capsys):
+    (tmp_path / "mine").mkdir()
+    report = tmp_path / "mine" / "report.md"
+    report.write_text("my own notes\n")
+    assert main(["run", "--quick", "--out", str(tmp_path / "mine"), "--no-progress"]) == 2
+    one_line_error(capsys, "run", "holds other files (report.md)", "new or empty folder")
+    assert report.read_text() == "my own notes\n"
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["report.md"]
+
+
+def test_the_recording_never_goes_over_the_scenario_or_the_config(tmp_path, capsys):
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_bytes(find_scenario(None).read_bytes())
+    config = tmp_path / "robot.yaml"
+    config.write_text("updater:\n  threshold: 7\n")
+    before = {p: digest(p) for p in (scenario, config)}
+    for target, name in ((scenario, "scenario"), (config, "--config")):
+        assert main(["run", str(scenario), "--quick", "--config", str(config), "--out",
+                     str(tmp_path / "run"), "--rerun", str(target), "--no-progress"]) == 2
+        one_line_error(capsys, "run", "--rerun", name)
+    assert {p: digest(p) for p in (scenario, config)} == before
+    assert not (tmp_path / "run").exists()
+
+
+def test_render_makes_no_folder_the_user_did_not_make(tmp_path, capsys):
+    out = tmp_path / "missing" / "w.png"
+    assert main(["render", "--out", str(out)]) == 2
+    one_line_error(capsys, "render", "does not exist", "make it first")
+    assert not (tmp_path / "missing").exists()

@@ -24,8 +24,16 @@ CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, e
                "class's defaults. --pose-check/--no-pose-check still turn the check on or off")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """A usage mistake is one line, as every other error of the command line, and names the
+    help that says how (argparse would print the whole usage first)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="mapupdate",
         description="Keep a 2D occupancy-grid map true while the world changes.")
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")

@@ -51,3 +51,15 @@ def test_render_makes_no_folder_the_user_did_not_make(tmp_path, capsys):
     assert main(["render", "--out", str(out)]) == 2
     one_line_error(capsys, "render", "does not exist", "make it first")
     assert not (tmp_path / "missing").exists()
+
+
+def test_a_usage_mistake_is_one_line_naming_the_help(capsys):
+    import pytest
+
+    for argv, words in ((["generate", "--seed", "1e9", "--out", "g.yaml"],
+                         "argument --seed: invalid int value: '1e9'"),
+                        (["update", "--map", "m.yaml"], "required: --log, --out")):
+        with pytest.raises(SystemExit) as stop:
+            main(argv)
+        assert stop.value.code == 2
+        one_line_error(capsys, argv[0], words, f"(see mapupdate {argv[0]} --help)")

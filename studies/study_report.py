@@ -13,6 +13,7 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -70,23 +71,50 @@ def session_rows(run_dir, metrics: dict, wall: dict) -> list[dict]:
 
 
 # --- reading a study folder --------------------------------------------------------------------
+RUN_KEY_CHARS = "A-Za-z0-9_.=+-"                 # what a sweep names its runs with
+RUN_KEY = re.compile(f"[{RUN_KEY_CHARS}]+")
+
+
 def collect(out_dir) -> tuple[list[dict], list[str]]:
     """(rows of every finished run in the study's order, the grid keys)."""
     out_dir = Path(out_dir)
+    sweep = _json(out_dir / "sweep.json", "study file", missing="not a study folder")
     try:
-        sweep = json.loads((out_dir / "sweep.json").read_text())
-    except FileNotFoundError:
-        raise StudyFolderError(f"{out_dir}: not a study folder (no sweep.json)") from None
-    grid = list(sweep["spec"].get("grid", {}))
+        grid, keys = list(sweep["spec"].get("grid", {})), list(sweep["runs"])
+    except (KeyError, TypeError, AttributeError) as e:
+        raise StudyFolderError(f"{out_dir / 'sweep.json'}: not a study file of this project "
+                               f"({type(e).__name__}: {e})") from None
     rows = []
-    for key in sweep["runs"]:
+    for key in keys:
+        # a run's folder is one name inside runs/: never a path that leaves the study
+        if not isinstance(key, str) or not RUN_KEY.fullmatch(key) or ".." in key:
+            raise StudyFolderError(f"{out_dir / 'sweep.json'}: run {key!r} is not a run name "
+                                   "of this study")
         path = out_dir / "runs" / key / "result.json"
         if not path.exists():
             continue
-        record = json.loads(path.read_text())
-        point = record["run"].get("point", {})
-        rows += [{**row, **{k: point.get(k) for k in grid}} for row in record["rows"]]
+        record = _json(path, "run result")
+        try:
+            point = record["run"].get("point", {})
+            rows += [{**row, **{k: point.get(k) for k in grid}} for row in record["rows"]]
+        except (KeyError, TypeError, AttributeError) as e:
+            raise StudyFolderError(f"{path}: not a run result of this project "
+                                   f"({type(e).__name__}: {e}); remove the run's folder to "
+                                   "run it again") from None
     return rows, grid
+
+
+def _json(path: Path, what: str, missing: str = "missing") -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise StudyFolderError(f"{path.parent}: {missing} (no {path.name})") from None
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
+        raise StudyFolderError(f"{path}: unreadable {what} ({type(e).__name__}: "
+                               f"{' '.join(str(e).split())[:160]})") from None
+    if not isinstance(data, dict):
+        raise StudyFolderError(f"{path}: not a {what} (a JSON object was expected)")
+    return data
 
 
 def results_csv(rows: list[dict], grid: list[str]) -> str:

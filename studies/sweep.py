@@ -49,7 +49,7 @@ from scenarios.checkpoint import _sha256
 from scenarios.generator import check_arguments, write_generated
 from scenarios.runner import RunOptions, run_scenario
 
-from .study_report import session_rows, summarise
+from .study_report import RUN_KEY_CHARS, session_rows, summarise
 from .sweep_ray import ray_tasks, require_ray
 
 SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
@@ -244,7 +244,7 @@ def _count_runs(spec: dict, source: str) -> int:
 
 # --- the runs --------------------------------------------------------------------------------
 def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.=+-]+", "-", text).strip("-")
+    return re.sub(f"[^{RUN_KEY_CHARS}]+", "-", text).strip("-")
 
 
 def scenario_files(spec: dict, out_dir: Path, progress: bool = False) -> list[tuple[str, Path]]:

@@ -63,3 +63,24 @@ def test_a_usage_mistake_is_one_line_naming_the_help(capsys):
             main(argv)
         assert stop.value.code == 2
         one_line_error(capsys, argv[0], words, f"(see mapupdate {argv[0]} --help)")
+
+
+def test_summarise_stays_inside_the_study_and_names_a_damaged_file(tmp_path, capsys):
+    import json
+
+    study = tmp_path / "study"
+    (study / "runs" / "a").mkdir(parents=True)
+    outside = tmp_path / "result.json"
+    outside.write_text(json.dumps({"run": {}, "rows": [{"scenario": "stolen"}]}))
+    sweep = {"format": 1, "spec": {}, "runs": ["../.."]}
+    (study / "sweep.json").write_text(json.dumps(sweep))
+    assert main(["sweep", "--summarise", str(study)]) == 2
+    one_line_error(capsys, "sweep", "run '../..' is not a run name of this study")
+    assert not (study / "results.csv").exists()
+    (study / "sweep.json").write_text(json.dumps({**sweep, "runs": ["a"]}))
+    (study / "runs" / "a" / "result.json").write_text('{"run": {"point": {}}, "rows": [')
+    assert main(["sweep", "--summarise", str(study)]) == 2
+    one_line_error(capsys, "sweep", "result.json: unreadable run result (JSONDecodeError")
+    (study / "sweep.json").write_text('{"spec": 3, "runs": 4}')
+    assert main(["sweep", "--summarise", str(study)]) == 2
+    one_line_error(capsys, "sweep", "sweep.json: not a study file of this project")

@@ -50,7 +50,7 @@ from scenarios.generator import check_arguments, write_generated
 from scenarios.runner import RunOptions, run_scenario
 
 from .study_report import RUN_KEY_CHARS, session_rows, summarise
-from .sweep_ray import ray_tasks, require_ray
+from .sweep_ray import check_address, ray_tasks, require_ray
 
 SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
 # The most runs one spec may ask for (the study of 20 warehouses x 3 seeds x 5 methods is 300;
@@ -410,6 +410,7 @@ def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None
         raise SweepError(f"--workers must be at least 1, got {workers}")
     if ray is not None:
         require_ray()
+        check_address(ray)              # before anything is written
     out = Path(out)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)

@@ -9,15 +9,44 @@ task of one CPU, so a study grows to many machines with no change to its spec.
 
 from __future__ import annotations
 
+import importlib.util
+import re
+import socket
 from pathlib import Path
 
 from gridmap import MapUpdatingError
 
 INSTALL_HINT = "pip install 'lidar-map-updating[ray]'"
+ADDRESS = re.compile(r"(?P<client>ray://)?(?P<host>[A-Za-z0-9_.-]+):(?P<port>[0-9]{1,5})")
+CONNECT_TIMEOUT = 5.0     # [s] a cluster that does not answer within this is not there
 
 
 class RayMissing(MapUpdatingError, ImportError):
     """Ray was asked for and is not installed."""
+
+
+class RayAddressError(MapUpdatingError, ValueError):
+    """An address of a Ray cluster that is malformed or where nothing answers."""
+
+
+def check_address(address: str) -> None:
+    """Refuse, in one line and within seconds, an address Ray would hang on or fail at:
+    "auto", HOST:PORT (a cluster's GCS) or ray://HOST:PORT (Ray's client, which needs
+    ``ray[client]``), with something answering on that port."""
+    if address == "auto":
+        return
+    m = ADDRESS.fullmatch(address or "")
+    if m is None or not 0 < int(m["port"]) < 65536:
+        raise RayAddressError(f"--ray {address!r}: not an address; give 'auto', HOST:PORT or "
+                              "ray://HOST:PORT")
+    if m["client"] and importlib.util.find_spec("grpc") is None:
+        raise RayAddressError(f"--ray {address}: Ray's client needs its extra: pip install "
+                              "'ray[client]'")
+    try:
+        socket.create_connection((m["host"], int(m["port"])), timeout=CONNECT_TIMEOUT).close()
+    except OSError as e:
+        raise RayAddressError(f"--ray {address}: no Ray cluster answers there within "
+                              f"{CONNECT_TIMEOUT:g} s ({e.strerror or e})") from None
 
 
 def require_ray():

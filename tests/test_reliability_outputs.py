@@ -84,3 +84,26 @@ def test_summarise_stays_inside_the_study_and_names_a_damaged_file(tmp_path, cap
     (study / "sweep.json").write_text('{"spec": 3, "runs": 4}')
     assert main(["sweep", "--summarise", str(study)]) == 2
     one_line_error(capsys, "sweep", "sweep.json: not a study file of this project")
+
+
+def test_a_ray_address_that_is_wrong_or_silent_is_one_line_within_seconds(tmp_path, capsys):
+    import socket
+    import time
+
+    import pytest
+
+    pytest.importorskip("ray")
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("scenarios: [aws_small_warehouse]\nquick: true\n")
+    with socket.socket() as s:                     # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        silent = f"127.0.0.1:{s.getsockname()[1]}"
+    for address, words in (("not an address", "not an address"),
+                           (silent, "no Ray cluster answers there")):
+        t0 = time.monotonic()
+        assert main(["sweep", str(spec), "--out", str(tmp_path / "study"), "--ray",
+                     address, "--no-progress"]) == 2
+        assert time.monotonic() - t0 < 10
+        one_line_error(capsys, "sweep", f"--ray {address!r}" if " " in address else address,
+                       words)
+    assert not (tmp_path / "study").exists()

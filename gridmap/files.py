@@ -37,7 +37,8 @@ def check_regular_file(path, what: str, limit: int | None = None) -> int:
     except OSError as e:
         raise FileInputError(f"{path}: cannot read the {what} ({e.strerror or e})") from None
     if not stat.S_ISREG(st.st_mode):
-        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a device?)"
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO (a named pipe)" \
+            if stat.S_ISFIFO(st.st_mode) else "not a regular file (a device?)"
         raise FileInputError(f"{path}: the {what} is {kind}")
     if limit is not None and st.st_size > limit:
         raise FileInputError(f"{path}: the {what} is {st.st_size} bytes, more than the "

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from gridmap import Pose2D, Scan
+from gridmap.files import FileInputError, check_regular_file
 
 from .carmen import GZIP_MAGIC, read_carmen
 from .frames import PoseTimeline, TransformTree
@@ -260,6 +261,12 @@ def log_observations(path, *, log_format: str | None = None, strict: bool = Fals
                      scan_topics=None, odom_topic=None, pose_topic=None, truth_topic=None,
                      laser_mount: Pose2D | None = None) -> LogObservations:
     """The observations of the log at ``path``, in log order (see ``LogObservations``)."""
+    if not Path(path).is_dir():
+        # a FIFO or a device would block the first read for ever, or never end
+        try:
+            check_regular_file(path, "log")
+        except FileInputError as e:
+            raise LogError(str(e)) from None
     fmt = log_format or detect_format(path)
     if fmt not in FORMATS:
         raise LogError(f"log format must be one of {', '.join(FORMATS)}, got {fmt!r}")

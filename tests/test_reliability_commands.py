@@ -1,6 +1,7 @@
-"""Outputs of the testbed's commands: never over an input, never into a folder that holds
-other files, never a folder made where the user named none. Each refusal is one line and
-exit 2, with every input as it was."""
+"""What the commands refuse, round three: outputs never over an input, never into a folder
+that holds other files, never a folder made where the user named none; a study that names a
+run outside it; a Ray address that is wrong or silent; a FIFO for a log; usage mistakes. Each
+refusal is one line and exit 2, with every input as it was."""
 
 from __future__ import annotations
 
@@ -107,3 +108,19 @@ def test_a_ray_address_that_is_wrong_or_silent_is_one_line_within_seconds(tmp_pa
         one_line_error(capsys, "sweep", f"--ray {address!r}" if " " in address else address,
                        words)
     assert not (tmp_path / "study").exists()
+
+
+def test_a_fifo_as_the_log_is_one_line_not_a_hang(tmp_path, capsys):
+    import os
+
+    from gridmap import OccupancyGrid, save_map
+
+    save_map(OccupancyGrid.empty(4, 3, 0.05), tmp_path / "m.yaml")
+    fifo = tmp_path / "log.clf"
+    os.mkfifo(fifo)
+    for argv in (["map", "--log", str(fifo), "--out", str(tmp_path / "a.yaml")],
+                 ["update", "--map", str(tmp_path / "m.yaml"), "--log", str(fifo), "--out",
+                  str(tmp_path / "b.yaml")]):
+        assert main([*argv, "--no-progress"]) == 2
+        one_line_error(capsys, argv[0], "the log is a FIFO (a named pipe)")
+    assert not (tmp_path / "a.yaml").exists() and not (tmp_path / "b.yaml").exists()

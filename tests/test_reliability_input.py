@@ -26,7 +26,7 @@ from mapupdate import main
 from mapupdate.summaries import update_lines as summary_lines
 from robot.replay import LogSource, Outputs, update_from_log
 from robotlogs.rosbag import BagWriter, read_bag, write_bag
-from updater import MapUpdater, UpdaterConfig, UpdaterError
+from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK
 
 try:
@@ -264,6 +264,19 @@ def test_replay_with_every_pose_off_the_map_skips_and_keeps_the_map(tmp_path):
     assert s["scans_used"] == 20 and s["scans_processed"] == 0
     assert s["cells_freed"] == s["cells_occupied"] == 0
     assert (load_map(tmp_path / "out.yaml").data == ref.data).all()
+
+
+@pytest.mark.parametrize("increment", [1e-12, 1e-38, 1e-300])
+def test_a_tiny_angle_increment_is_processed_in_bounded_time(increment):
+    import time
+
+    grid = OccupancyGrid.empty(100, 100, 0.05)
+    updater = MapUpdater(grid, UpdaterConfig(gating=False))
+    scan = Scan(np.full(100, 2.0, np.float32), 0.0, increment, 0.05, 20.0, 1.0)
+    t0 = time.perf_counter()
+    report = updater.process(scan, Pose2D(2.5, 2.5, 0.0))
+    assert report.status is ScanStatus.PROCESSED       # the window clamped to the scan
+    assert time.perf_counter() - t0 < 5.0              # (1e11 beams searched, unclamped)
 
 
 def test_a_log_with_no_usable_scan_is_an_error_and_writes_nothing(tmp_path, capsys):

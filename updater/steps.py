@@ -173,6 +173,9 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     k.cast_virtual(ref, sensor, virtual, max_len, ws.expected, ws.found)
     step = scan.angle_increment / ratio
     half = int(math.floor(math.radians(cfg.window_deg) / abs(step) + 1e-9)) if n else 0
+    # a window wider than the scan searches nothing more; a tiny angle_increment (1e-12 rad)
+    # would otherwise ask the kernel for 1e11 beams, holding the interpreter for hours
+    half = min(half, n * ratio)
     wrap = scan.covers_full_circle()
     pairing, tol, skip = beam_distances(ranges, res, cfg)
     raw = k.classify(ws.hits, ws.valid, pairing=pairing, expected=ws.expected, found=ws.found,

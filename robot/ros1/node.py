@@ -134,7 +134,10 @@ class MapUpdaterNode:
                     continue
                 msg, topic = self._queue.popleft()
             t0 = time.perf_counter()
-            self._handle(msg, topic)
+            try:
+                self._handle(msg, topic)
+            except Exception as e:  # noqa: BLE001 - whatever one scan raises, the worker goes on
+                self._skip(f"scan raised {type(e).__name__}", e)
             self.health.times.append(time.perf_counter() - t0)
 
     def _handle(self, msg, topic: str) -> None:
@@ -169,7 +172,10 @@ class MapUpdaterNode:
                               else "no transform at the scan's time", e)
         except tf2.TransformException as e:
             return self._skip("no transform for the scan's frames", e)
-        return map_odom.compose(odom), odom, mount
+        robot = map_odom.compose(odom)
+        if not (robot.is_finite() and odom.is_finite() and mount.is_finite()):
+            return self._skip("transform not finite", f"robot {robot}, laser mount {mount}")
+        return robot, odom, mount
 
     def _lookup(self, parent: str, child: str, stamp) -> Pose2D:
         rospy = self.ros["rospy"]

@@ -214,7 +214,10 @@ class MapUpdaterNode(LifecycleNode):
         while self._scans and (force or self.poses.ready(self._scans[0][0].time)):
             rec, arrival = self._scans.pop(0)
             t0 = time.perf_counter()
-            self._use(rec)
+            try:
+                self._use(rec)
+            except Exception as e:  # noqa: BLE001 - whatever one scan raises, the node goes on
+                self._skip(f"scan raised {type(e).__name__}", e)
             done = time.perf_counter()
             self.health.times.append(done - t0)
             self.health.latencies.append(done - arrival)

@@ -79,7 +79,7 @@ def main(bag: str, rate: float) -> int:
         if time.monotonic() > end:
             raise SystemExit("nobody subscribed to the recording's topics within 60 s")
         time.sleep(0.1)
-    time.sleep(0.5)
+    time.sleep(1.0)                  # and the subscribers' side of the match (best effort)
     t0, wall0 = records[0].time, time.monotonic()
     for r in records:
         wait = (r.time - t0) / rate - (time.monotonic() - wall0)

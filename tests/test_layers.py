@@ -32,8 +32,9 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     ("gridmap", set()), ("updater", {"gridmap"}), ("localization", {"gridmap"}),
     ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"}),
     ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation"}),
+    # (scenarios/__main__.py: ``python -m scenarios`` is the command line)
     ("scenarios", {"gridmap", "sim", "updater", "localization", "evaluation", "robotlogs",
-                   "robot"}),
+                   "robot", "mapupdate"}),
     ("studies", {"gridmap", "sim", "robot", "scenarios"}),
     ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "robot", "scenarios",
                    "studies", "sim"})])

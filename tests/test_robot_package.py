@@ -73,10 +73,11 @@ def test_a_command_without_its_extra_says_in_one_line_what_to_install(argv, extr
     assert list(tmp_path.iterdir()) == []       # nothing made before the refusal
 
 
-def test_version_is_the_installed_distributions():
+@pytest.mark.parametrize("module", ["mapupdate", "scenarios"])
+def test_version_is_the_installed_distributions(module):
     from importlib import metadata
 
-    p = subprocess.run([sys.executable, "-m", "mapupdate", "--version"], capture_output=True,
+    p = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True,
                        text=True, timeout=60)
     assert p.stdout.strip() == f"mapupdate {metadata.version('lidar-map-updating')}"
 

@@ -216,7 +216,8 @@ def test_a_misspelt_parameter_fails_configure_with_the_nearest_name(graph, recor
     assert node.wait(90) == 2
     log = graph.log(name)
     assert "unknown key 'treshold'" in log and "did you mean 'threshold'" in log
-    assert "mapupdate ros2: error: the node did not come up (configure failed" in log
+    assert "mapupdate ros2: error: the node did not come up: configure failed: node " \
+           "parameters: unknown key 'treshold'" in log
     assert "Traceback" not in log
 
 
@@ -306,3 +307,14 @@ def test_malformed_traffic_is_counted_and_skipped_never_a_crash(graph, recording
     assert values["_level"] == 1                                  # WARN
     assert node.poll() is None and graph.stop(node) == 0
     assert "Traceback" not in graph.log(name)
+
+
+def test_the_player_refuses_a_missing_bag_or_an_absurd_rate_in_one_line(graph, recording):
+    import subprocess
+
+    for args, words in (([graph.folder / "nope.bag"], "no such bag"),
+                        ([recording / "bags/W2.bag", "--rate", "-1"], "--rate must be")):
+        p = subprocess.run([str(ros2_tools.PYTHON), "-m", "robot.ros2.play", *map(str, args)],
+                           env=graph.env, capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2 and p.stderr.strip().splitlines() == [
+            next(line for line in p.stderr.splitlines() if words in line)]

@@ -169,13 +169,12 @@ class MapUpdater:
                 n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
                 return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
                                   changed_cells=self._n_changed, sensor_pose=sensor_pose)
-        placed, status, reason = self._placed_pose(sensor_pose, pose_check)
+        placed, sensor, status, reason = self._placed_pose(sensor_pose, pose_check)
         if status is not None:
             self._counts["skipped"] += 1
             return ScanReport(t, status, reason, changed_cells=self._n_changed,
                               sensor_pose=placed)
 
-        sensor = steps.to_grid(placed, self._origin, self._res)
         beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws)
         self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
@@ -250,12 +249,13 @@ class MapUpdater:
                                         self._ref.shape[1], cfg, ws)
 
     def _placed_pose(self, sensor_pose: Pose2D, pose_check):
-        """(pose, None, "") for a scan to process: the given sensor pose, or the one the pose
-        check refined it to; (pose or None, status, reason) for one to skip."""
+        """(pose, its grid coordinates, None, "") for a scan to process: the given sensor pose,
+        or the one the pose check refined it to; (pose or None, ..., status, reason) for one to
+        skip."""
         placed = sensor_pose
+        sensor = steps.to_grid(placed, self._origin, self._res)
         verdict = PoseVerdict.accepted()
-        if pose_check is not None and self._on_map(steps.to_grid(placed, self._origin,
-                                                                 self._res)):
+        if pose_check is not None and self._on_map(sensor):
             verdict = pose_check()
             if not isinstance(verdict, PoseVerdict):
                 raise UpdaterError(f"pose_check must return a gridmap.PoseVerdict, got "
@@ -265,11 +265,12 @@ class MapUpdater:
                     raise UpdaterError(f"pose_check returned a non-finite sensor pose "
                                        f"{verdict.sensor_pose}")
                 placed = verdict.sensor_pose
-        if not self._on_map(steps.to_grid(placed, self._origin, self._res)):
-            return placed, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
+                sensor = steps.to_grid(placed, self._origin, self._res)
+        if not self._on_map(sensor):
+            return placed, sensor, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
         if verdict.is_refused:
-            return None, ScanStatus.REFUSED, verdict.reason
-        return placed, None, ""
+            return None, sensor, ScanStatus.REFUSED, verdict.reason
+        return placed, sensor, None, ""
 
     def _on_map(self, sensor: np.ndarray) -> bool:
         height, width = self._ref.shape

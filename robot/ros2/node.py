@@ -71,6 +71,7 @@ class MapUpdaterNode(LifecycleNode):
         self.health = Health()
         self.pipeline: RobotPipeline | None = None
         self.settings: Ros2Settings | None = None
+        self.failure = ""                       # why the last configure failed
         self._active = []                       # what activate made and deactivate destroys
         self._configured = []                   # what configure made and cleanup destroys
         self._reset_state()
@@ -102,7 +103,8 @@ class MapUpdaterNode(LifecycleNode):
             declare_all(self, self.settings, self.updater_config, self.pose_check_config)
             reference = load_map(self.map_path) if self.map_path is not None else None
         except (MapUpdatingError, OSError) as e:
-            self.get_logger().error(f"configure: {' '.join(str(e).split())}")
+            self.failure = " ".join(str(e).split())
+            self.get_logger().error(f"configure: {self.failure}")
             return FAILURE
         s = self.settings
         self._configured = [self.create_service(Trigger, f"~/{name}", handler)
@@ -325,14 +327,16 @@ def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None
         if autostart:
             for step in (node.trigger_configure, node.trigger_activate):
                 if step() != SUCCESS:
-                    raise MapUpdatingError(f"the node did not come up ({step.__name__[8:]} "
-                                           "failed; its log says why)")
+                    raise MapUpdatingError(f"the node did not come up: {step.__name__[8:]} "
+                                           f"failed: {node.failure or 'see its log'}")
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         # on SIGINT rclpy's context is already shut down, and its logger with it
-        print(f"{node.get_name()}: {node.summary()}", flush=True)
+        summary = node.summary() if node.settings is not None else ""
+        if summary:
+            print(f"{node.get_name()}: {summary}", flush=True)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

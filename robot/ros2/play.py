@@ -21,6 +21,7 @@ from nav_msgs.msg import Odometry
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
+from gridmap import MapUpdatingError
 from robotlogs.records import OdomRecord, PoseRecord, ScanRecord
 from robotlogs.rosbag import read_bag
 
@@ -63,6 +64,12 @@ def amcl_msg(r: PoseRecord) -> PoseWithCovarianceStamped:
 
 
 def main(bag: str, rate: float) -> int:
+    if not (math.isfinite(rate) and 0 < rate <= 1000):
+        raise MapUpdatingError(f"--rate must be a number in (0, 1000], got {rate:g}")
+    kinds = (ScanRecord, OdomRecord, PoseRecord)
+    records = [r for r in read_bag(bag, kinds=("scan", "odom", "pose")) if type(r) in kinds]
+    if not records:
+        raise MapUpdatingError(f"{bag}: no scans, odometry or poses to play")
     rclpy.init()
     node = rclpy.create_node("recording_player")
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -72,7 +79,6 @@ def main(bag: str, rate: float) -> int:
             OdomRecord: (node.create_publisher(Odometry, "odom", 50), odom_msg),
             PoseRecord: (node.create_publisher(PoseWithCovarianceStamped, "amcl_pose",
                                                latched), amcl_msg)}
-    records = [r for r in read_bag(bag, kinds=("scan", "odom", "pose")) if type(r) in pubs]
     # discovery: a scan sent before the node's subscription matched would be lost
     end = time.monotonic() + 60
     while any(pub.get_subscription_count() == 0 for pub, _ in pubs.values()):
@@ -100,4 +106,8 @@ if __name__ == "__main__":
     ap.add_argument("bag", help="ROS 1 bag or ROS 2 bag folder")
     ap.add_argument("--rate", type=float, default=1.0, help="times real time (1)")
     a = ap.parse_args()
-    sys.exit(main(a.bag, a.rate))
+    try:
+        sys.exit(main(a.bag, a.rate))
+    except (MapUpdatingError, OSError) as e:
+        print(f"robot.ros2.play: error: {' '.join(str(e).split())}", file=sys.stderr)
+        sys.exit(2)

@@ -16,7 +16,10 @@ def call(service: str, timeout: float = 30.0) -> tuple[bool, str]:
     rclpy.init()
     node = rclpy.create_node("trigger_client")
     try:
-        client = node.create_client(Trigger, service)
+        try:
+            client = node.create_client(Trigger, service)
+        except Exception as e:  # noqa: BLE001 - rclpy's refusal of a name, in its own words
+            return False, f"{service!r} is not a service name ({' '.join(str(e).split())[:120]})"
         if not client.wait_for_service(timeout_sec=timeout):
             return False, f"no service {service} within {timeout:g} s"
         future = client.call_async(Trigger.Request())

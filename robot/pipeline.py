@@ -17,11 +17,15 @@ answer is a typed ``gridmap.PoseVerdict`` and the updater's a ``ScanReport`` wit
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass, field
 from functools import partial
 
-from gridmap import Pose2D, Scan
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D, Scan
+from localization.modes import StartWatch
 from updater import MapMethod, ScanReport, ScanStatus
 
 
@@ -66,7 +70,12 @@ class RobotPipeline:
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.
     ``tracking``: a ``localization.tracking.TrackingMonitor``, judging the localiser after each
-    filter update; while it is not tracking, scans are withheld from the updater.
+    filter update; while it is not tracking, scans are withheld from the updater. After a
+    start over the whole map, a ``localization.modes.StartWatch`` follows the places of
+    similar weight the particles go through until the monitor first trusts the filter, and
+    ``step`` then raises ``localization.modes.AmbiguousStart`` when the scans fit another of
+    them as well (``refuse_ambiguous_start``, on by default): a symmetric room's mirror pose
+    would otherwise be trusted and the map updated from it.
     ``smoother``: a ``localization.smoothing.PoseSmoother`` for the poses given with the scans
     (a recorded localisation that jitters), used only without a localiser. ``cpu`` holds
     the process time spent in the localiser (tracking verdict included) and in the updater
@@ -82,6 +91,9 @@ class RobotPipeline:
         self.smoother = smoother
         self.counts = PipelineCounts()
         self.cpu = {"localizer_s": 0.0, "updater_s": 0.0}
+        self.refuse_ambiguous_start = True
+        self.start_watch: StartWatch | None = None
+        self._start_odometry: Pose2D | None = None   # the localiser's first odometry
 
     def step(self, scan: Scan, mount: Pose2D, odometry: Pose2D | None = None,
              pose: Pose2D | None = None) -> Step:
@@ -120,14 +132,30 @@ class RobotPipeline:
         if odometry is None:
             return None, None
         t0 = time.process_time()
+        if self._start_odometry is None:
+            self._start_odometry = odometry
         updated = bool(self.localizer.update(odometry, scan, mount))
         self.counts.localizer_updates += updated
         est = self.localizer.estimate()
         robot = est.pose_at(odometry)
         if updated and self.tracking is not None:
-            self.tracking.observe(self.localizer, scan, robot, mount)
+            self._judge(scan, mount, odometry, robot)
         self.cpu["localizer_s"] += time.process_time() - t0
         return robot, est.cov
+
+    def _judge(self, scan: Scan, mount: Pose2D, odometry: Pose2D, robot: Pose2D) -> None:
+        """The tracking verdict on a filter update; until a start over the whole map is first
+        trusted, the start watch too, which raises ``AmbiguousStart`` at that moment when the
+        scans fit another place as well."""
+        watching = self.refuse_ambiguous_start and self.tracking.never_tracked
+        self.tracking.observe(self.localizer, scan, robot, mount)
+        if not watching:
+            return
+        if self.start_watch is None:
+            self.start_watch = StartWatch(self.localizer.grid, self._start_odometry)
+        self.start_watch.observe(self.localizer, scan, mount, odometry, robot)
+        if self.tracking.tracking:
+            self.start_watch.refuse(robot)
 
     def _count(self, report: ScanReport) -> None:
         c = self.counts
@@ -139,3 +167,30 @@ class RobotPipeline:
             c.scans_gated += 1
             c.gated_by[report.reason] = c.gated_by.get(report.reason, 0) + 1
             c.scans_confirming += report.unchanged_flags > 0
+
+
+def warm_up(build, resolution: float = 0.05) -> None:
+    """Run a throwaway pipeline, ``build(grid)``, over a few scans in a small walled room at
+    ``resolution`` (one block in it that the scans see through, a removed object), so that
+    numba has compiled (or loaded) the kernels before a live node's first real scan: a first
+    scan that compiles holds the node for seconds, and a lidar's best-effort queue drops what
+    arrives meanwhile. The kernels' compiled forms depend on the types, not on the map: a
+    node warms up once, before it subscribes."""
+    n = 80
+    data = np.zeros((n, n), np.int8)
+    data[:2, :] = data[-2:, :] = data[:, :2] = data[:, -2:] = 100
+    data[30:34, 50:54] = 100
+    grid = OccupancyGrid(data, resolution, (0.0, 0.0))
+    pipeline = build(grid)
+    inner = (2 * resolution, (n - 2) * resolution)           # the walls' faces
+    angles = -math.pi + np.arange(360) * (2 * math.pi / 360)
+    for k in range(6):
+        x, y, th = inner[1] * (0.3 + 0.03 * k), inner[1] * 0.5, 0.2 * k
+        c, s = np.cos(angles + th), np.sin(angles + th)
+        with np.errstate(divide="ignore"):
+            tx = np.where(c > 0, (inner[1] - x) / c, (inner[0] - x) / c)
+            ty = np.where(s > 0, (inner[1] - y) / s, (inner[0] - y) / s)
+        ranges = np.minimum(np.abs(tx), np.abs(ty)).astype(np.float32)
+        scan = Scan(ranges, -math.pi, 2 * math.pi / 360, 0.0, 2 * n * resolution, time=k)
+        robot = Pose2D(x, y, th)
+        pipeline.step(scan, Pose2D(0.0, 0.0, 0.0), odometry=robot, pose=robot)

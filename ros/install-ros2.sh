@@ -7,7 +7,15 @@
 set -u
 py=${1:?usage: install-ros2.sh PYTHON}
 venv=.venv-ros2
+msgs() {
+  # tf2_msgs and map_msgs from their definitions (no wheel carries them)
+  [ -d "$venv/share/tf2_msgs" ] && [ -d "$venv/share/map_msgs" ] && return 0
+  echo "building tf2_msgs and map_msgs into $venv (/tf for the node's poses, the costmap's updates)"
+  sh ros/build-ros2-msgs.sh "$venv" >>"$venv.log" 2>&1 ||
+    echo "could not build tf2_msgs and map_msgs (see $venv.log): the node's tf tests will skip"
+}
 if [ -x "$venv/bin/mapupdate" ] && [ "$venv/bin/mapupdate" -nt pyproject.toml ]; then
+  msgs
   exit 0
 fi
 if ! "$py" -c 'import sys, platform; sys.exit(not (sys.version_info[:2] == (3, 11) and platform.machine() == "x86_64"))'; then
@@ -17,5 +25,5 @@ fi
 echo "installing ROS 2 Jazzy's wheels into $venv (the live ROS 2 node and its tests)"
 { "$py" -m venv "$venv" && "$venv/bin/pip" install --quiet --upgrade pip &&
   "$venv/bin/pip" install --quiet -e '.[ros2]' 'cyclonedds>=0.10'; } >"$venv.log" 2>&1 \
-  && touch "$venv/bin/mapupdate" \
+  && touch "$venv/bin/mapupdate" && msgs \
   || echo "could not install the ROS 2 wheels (see $venv.log): the ROS 2 tests will skip"

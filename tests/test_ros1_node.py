@@ -167,6 +167,13 @@ rospy.init_node("bad_robot", disable_signals=True)
 scans = rospy.Publisher("scan", LaserScan, queue_size=100)
 maps = rospy.Publisher("map", OccupancyGrid, queue_size=2, latch=True)
 tf = tf2_ros.TransformBroadcaster()
+static = tf2_ros.StaticTransformBroadcaster()
+
+def mount(x):                                     # a second lidar's mount on /tf_static
+    t = TransformStamped()
+    t.header.stamp, t.header.frame_id, t.child_frame_id = rospy.Time.now(), "base_link", "laser2"
+    t.transform.translation.x, t.transform.rotation.w = x, 1.0
+    static.sendTransform(t)
 
 def grid(res):
     m = OccupancyGrid()
@@ -207,10 +214,18 @@ good = [0.5] * 181
 scan(now, [float("nan"), -1.0] * 20 + good[40:])  # NaN and negative ranges among good ones
 scan(now, [])                                     # an empty scan
 scan(now, good, frame="nowhere")                  # a frame with no transform
-scan(start - rospy.Duration(60.0), good)          # older than the tf buffer
+for _ in range(20):                               # older than the tf buffer: no waiting
+    scan(start - rospy.Duration(60.0), good)
 maps.publish(grid(0.10))                          # a map of another resolution
 time.sleep(0.5)
 scan(now, good)                                   # and a good one still goes through
+mount(float("inf"))                               # a mount of inf: that scan skipped
+time.sleep(0.5)
+scan(now, good, frame="laser2")
+time.sleep(1.5)                                   # (the node's worker has taken it)
+mount(0.1)                                        # corrected: counts from then on
+time.sleep(0.5)
+scan(now, good, frame="laser2")
 time.sleep(2.0)
 print("sent")
 """
@@ -221,13 +236,15 @@ def test_malformed_traffic_is_counted_and_skipped_never_a_crash(ros, tmp_path):
     assert "sent" in ros.run_script(MALFORMED)
     values = ros.health("tolerant", tmp_path / "d.json")
     assert node.poll() is None                                  # still running
-    assert values["scans_received"] == "5"
+    assert values["scans_received"] == "26"
     assert values["skipped: empty scan"] == "1"
     assert values["skipped: no transform for the scan's frames"] == "1"
-    assert values["skipped: scan older than the tf buffer"] == "1"
+    # the stale ones went at once: a tf wait each (0.2 s) would not have ended by now
+    assert values["skipped: scan older than the tf buffer"] == "20"
     assert values["skipped: map of another size, resolution or origin"] == "1"
     assert values["scans_with_bad_ranges"] == "1"
-    assert values["scans_used"] == "2"                          # the NaN one and the good one
+    assert values["skipped: transform not finite"] == "1"       # the mount of inf
+    assert values["scans_used"] == "3"          # the NaN one, the good one, the corrected mount
     assert values["maps_received"] == "1" and values["_level"] == 1     # WARN
     ros.stop(node)
 

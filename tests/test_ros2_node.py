@@ -1,13 +1,15 @@
 """The live ROS 2 node in a real ROS 2 graph (ROS 2 Jazzy's wheels in .venv-ros2, a domain of
-its own): a W2 recording replayed into it by a separate rclpy process gives the map `mapupdate
-update` makes of that recording, cell for cell; a subscriber of another DDS implementation
-(cyclonedds) that joins late receives the latched map; the lifecycle transitions in and out of
-order; commit, reset and a misspelt parameter. Skipped, with the reason, where the wheels
-cannot be had."""
+its own): a W2 recording replayed into it by a separate rclpy process, its poses on /tf and
+/tf_static or on /amcl_pose and /odom, gives the map `mapupdate update` makes of that
+recording, cell for cell, and the costmap's updates rebuild it; a subscriber of another DDS
+implementation (cyclonedds) that joins late receives the latched map; the lifecycle transitions
+in and out of order; commit, reset and a misspelt parameter; bad traffic counted. Skipped, with
+the reason, where the wheels cannot be had."""
 
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -21,6 +23,8 @@ pytestmark = pytest.mark.skipif(bool(ros2_tools.missing()),
                                 reason=ros2_tools.missing() or "-")
 NODE = "/map_updater"
 MOUNT = "laser_mount:=[0.25, 0.0, 0.0]"          # the simulated robot's lidar (its /tf_static)
+AMCL = "pose_source:=amcl_pose"
+needs_tf = pytest.mark.skipif(bool(ros2_tools.missing_tf()), reason=ros2_tools.missing_tf() or "-")
 CONFIGURE, CLEANUP, ACTIVATE, DEACTIVATE = 1, 2, 3, 4   # lifecycle_msgs/msg/Transition
 
 
@@ -55,25 +59,87 @@ def state(graph, node: str) -> str:
         "label"]
 
 
+UPDATES_LISTENER = """
+import os, sys
+import numpy as np
+import rclpy
+from map_msgs.msg import OccupancyGridUpdate
+from nav_msgs.msg import OccupancyGrid
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+out = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("costmap_like")
+state = {"grid": None, "updates": 0}
+
+def keep():
+    np.save(out + ".tmp.npy", state["grid"])
+    os.replace(out + ".tmp.npy", out + f".{state['updates']}.npy")
+
+def on_map(m):
+    if state["grid"] is None:           # the first map only: the rest must come as updates
+        state["grid"] = np.asarray(m.data, np.int8).reshape(m.info.height, m.info.width)
+        keep()
+
+def on_update(u):
+    state["updates"] += 1
+    state["grid"][u.y:u.y + u.height, u.x:u.x + u.width] = np.asarray(
+        u.data, np.int8).reshape(u.height, u.width)
+    keep()
+
+latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+node.create_subscription(OccupancyGrid, "map_updated", on_map, latched)
+node.create_subscription(OccupancyGridUpdate, "map_updated_updates", on_update, 10)
+rclpy.spin(node)
+"""
+
+
+def _replay_and_save(graph, recording, name: str, poses: str, *params, listen=False) -> dict:
+    save = graph.folder / f"{name}.yaml"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", *params, "-p", f"save_path:={save}", name=name)
+    graph.wait_for_service(f"/{name}/get_state", timeout=180)   # a cold numba cache compiles
+    assert state(graph, f"/{name}") == "active"
+    listener = None
+    if listen:
+        listener = graph.start(["-c", UPDATES_LISTENER, graph.folder / f"{name}-costmap"],
+                               f"{name}-costmap")
+        ros2_tools.wait_until(lambda: list(graph.folder.glob(f"{name}-costmap.0.npy")), 60,
+                              "the costmap-like listener's first map")
+    graph.replay(recording / "bags/W2.bag", rate=4.0, poses=poses)
+    assert graph.call(f"/{name}/save")["success"]
+    if listener is not None:
+        time.sleep(2.0)                                         # the last period's update
+        graph.stop(listener)
+    return {"node": node, "saved": load_map(save).data}
+
+
 @pytest.fixture(scope="module")
 def replayed(graph, recording):
-    """The node on M1, W2 replayed into it at four times real time; the map it saved."""
-    save = graph.folder / "saved.yaml"
-    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
-                      "-p", MOUNT, "-p", f"save_path:={save}")
-    graph.wait_for_service(f"{NODE}/get_state")
-    assert state(graph, NODE) == "active"
-    graph.replay(recording / "bags/W2.bag", rate=4.0)
-    assert graph.call(f"{NODE}/save")["success"]
-    yield {"node": node, "saved": load_map(save).data}
+    """The node on M1, W2 replayed into it at four times real time, its poses on /tf and
+    /tf_static; the map it saved. The default name, as the other tests address it."""
+    if ros2_tools.missing_tf():
+        pytest.skip(ros2_tools.missing_tf())
+    yield _replay_and_save(graph, recording, "map_updater", "tf", listen=True)
 
 
+@needs_tf
 def test_the_node_saves_the_map_mapupdate_update_makes_of_the_same_recording(replayed,
                                                                              recording):
     expected = load_map(recording / "update.yaml").data
     reference = load_map(recording / "run/maps/M_W1.yaml").data
     assert (expected != reference).sum() > 300                  # W2 changed the map
     assert np.array_equal(replayed["saved"], expected)          # cell for cell
+
+
+@needs_tf
+def test_the_costmaps_updates_rebuild_the_map_from_the_first_one(replayed, graph):
+    kept = sorted(graph.folder.glob("map_updater-costmap.*.npy"),
+                  key=lambda f: int(f.name.split(".")[1]))
+    assert len(kept) > 2                                        # the first map, then updates
+    rebuilt = np.load(kept[-1])
+    assert np.array_equal(rebuilt, replayed["saved"])
 
 
 CYCLONE_READER = """
@@ -156,7 +222,7 @@ def test_a_late_subscriber_of_another_dds_gets_the_latched_updated_map(replayed,
 
 
 def test_reset_and_commit_do_what_they_say(replayed, graph, recording):
-    save = graph.folder / "saved.yaml"
+    save = graph.folder / "map_updater.yaml"
     reference = load_map(recording / "run/maps/M_W1.yaml").data
     assert graph.call(f"{NODE}/reset")["success"]              # buffers cleared: M1 again
     assert graph.call(f"{NODE}/save")["success"]
@@ -296,8 +362,8 @@ print(json.dumps(values))
 def test_malformed_traffic_is_counted_and_skipped_never_a_crash(graph, recording):
     name = "bad_probe"
     node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
-                      "-r", f"__node:={name}", "-p", MOUNT, "-p", "publish_period:=0.2",
-                      name=name)
+                      "-r", f"__node:={name}", "-p", MOUNT, "-p", AMCL, "-p",
+                      "publish_period:=0.2", name=name)
     values = json.loads(graph.script(BAD_TRAFFIC, name, timeout=120).strip().splitlines()[-1])
     assert values["skipped: malformed scan"] == "1"
     assert values["skipped: empty scan"] == "1"
@@ -318,3 +384,109 @@ def test_the_player_refuses_a_missing_bag_or_an_absurd_rate_in_one_line(graph, r
                            env=graph.env, capture_output=True, text=True, timeout=120)
         assert p.returncode == 2 and p.stderr.strip().splitlines() == [
             next(line for line in p.stderr.splitlines() if words in line)]
+
+
+TF_TRAFFIC = """
+import json, math, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TransformStamped
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from tf2_msgs.msg import TFMessage
+
+node_name = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("tf_traffic")
+latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+scans = node.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
+tf = node.create_publisher(TFMessage, "/tf", 100)
+tf_static = node.create_publisher(TFMessage, "/tf_static", latched)
+seen = {}
+node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: seen.update(
+    {s.name: {v.key: v.value for v in s.values} for s in m.status}), 10)
+end = time.monotonic() + 60
+while min(p.get_subscription_count() for p in (scans, tf, tf_static)) == 0:
+    rclpy.spin_once(node, timeout_sec=0.1)
+    assert time.monotonic() < end, "the node never subscribed"
+for _ in range(10):
+    rclpy.spin_once(node, timeout_sec=0.1)
+t0 = node.get_clock().now().nanoseconds / 1e9
+
+def stamped(msg, t):
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int((t % 1) * 1e9)
+    return msg
+
+def edge(t, parent, child, x):
+    e = stamped(TransformStamped(), t)
+    e.header.frame_id, e.child_frame_id = parent, child
+    e.transform.translation.x, e.transform.rotation.w = x, 1.0
+    return e
+
+def send(pub, *edges):
+    m = TFMessage()
+    m.transforms = list(edges)
+    pub.publish(m)
+    for _ in range(3):
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+def scan(t):
+    m = stamped(LaserScan(), t)
+    m.header.frame_id = "laser"
+    m.angle_min, m.angle_increment, m.angle_max = -0.5, 0.01, 0.5
+    m.range_min, m.range_max, m.ranges = 0.05, 20.0, [2.0] * 101
+    scans.publish(m)
+
+send(tf_static, edge(t0, "base_link", "camera", 0.1))      # no laser in the static tf yet
+for k in range(3):
+    send(tf, edge(t0 + 0.1 * k, "odom", "base_link", 0.01 * k),
+         edge(t0 + 0.1 * k, "map", "odom", 0.0))
+scan(t0 + 0.05)                                             # no base_link -> laser: skipped
+send(tf, edge(t0 + 0.25, "odom", "base_link", math.inf))    # not finite: the message skipped
+send(tf_static, edge(t0, "base_link", "laser", 0.25))       # the mount arrives: counts from now
+for k in range(3, 6):
+    send(tf, edge(t0 + 0.1 * k, "odom", "base_link", 0.01 * k),
+         edge(t0 + 0.1 * k, "map", "odom", 0.0))
+scan(t0 + 0.35)                                             # placed: used
+send(tf, edge(t0 + 0.6, "odom", "base_link", 0.06), edge(t0 + 0.6, "map", "odom", 0.0))
+end = time.monotonic() + 30
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.2)
+    values = seen.get(f"/{node_name}: health", {})
+    if values.get("scans_received") == "2" and values.get("scans_used") == "1":
+        break
+print(json.dumps(values))
+"""
+
+
+@needs_tf
+def test_tf_traffic_a_late_mount_and_a_transform_of_inf_are_counted(graph, recording):
+    name = "tf_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", "-p", "publish_period:=0.2", "-p",
+                      "tf_timeout:=0.1", name=name)
+    values = json.loads(graph.script(TF_TRAFFIC, name, timeout=120).strip().splitlines()[-1])
+    assert values["scans_received"] == "2" and values["scans_used"] == "1"
+    assert values["skipped: no transform from the base to the scan's frame"] == "1"
+    assert values["skipped: transform not finite"] == "1"
+    assert node.poll() is None and graph.stop(node) == 0
+    assert "Traceback" not in graph.log(name)
+
+
+def test_pose_source_tf_without_tf2_msgs_or_a_bad_source_fails_configure(graph, recording):
+    name = "source_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", "-p", "pose_source:=gps", name=name)
+    assert node.wait(90) == 2
+    log = graph.log(name)
+    assert "parameter 'pose_source' must be one of tf, amcl_pose, got 'gps'" in log
+    assert "Traceback" not in log
+
+
+# last: the other nodes of the graph hear this replay too, and the default node keeps the first
+# replay's tf, which the same stamps would find again
+def test_with_amcl_pose_and_odometry_the_same_map(graph, recording):
+    got = _replay_and_save(graph, recording, "amcl_probe", "amcl_pose", "-p", AMCL, "-p", MOUNT)
+    assert np.array_equal(got["saved"], load_map(recording / "update.yaml").data)
+    assert graph.stop(got["node"]) == 0

@@ -197,3 +197,62 @@ def test_saving_over_the_input_map_is_refused_at_start(tmp_path):
             refuse_saving_over_the_map(str(tmp_path / clash), tmp_path / "m.yaml")
     refuse_saving_over_the_map(str(tmp_path / "other.yaml"), tmp_path / "m.yaml")
     refuse_saving_over_the_map(str(tmp_path / "m.yaml"), None)      # the map from its topic
+
+
+def _edge(t, parent, child, x, y=0.0, th=0.0, static=False):
+    from gridmap import Pose2D
+    from robotlogs.records import TransformRecord
+    return TransformRecord(t, parent, child, Pose2D(x, y, th), static=static)
+
+
+def test_tf_poses_interpolate_compose_and_wait_for_the_localisers_correction():
+    from robot.ros_common.poses import TfPoses
+
+    p = TfPoses("map", "odom", "base_link")
+    p.add(_edge(0.0, "base_link", "laser", 0.25, static=True))
+    for t, x in ((0.0, 0.0), (1.0, 1.0)):
+        p.add(_edge(t, "odom", "base_link", x))
+    assert p.ready(0.5)                          # no correction has come yet: odometry only
+    p.add(_edge(0.0, "map", "odom", 10.0, 5.0, np.pi / 2))
+    assert not p.ready(0.5)                      # amcl's correction of 0.5 or later not yet
+    p.add(_edge(1.0, "map", "odom", 10.0, 5.0, np.pi / 2))
+    assert p.ready(0.5) and not p.ready(1.0)     # odometry not past 1.0
+    robot, odom = p.at(0.5)
+    # by hand: odom x 0.5, turned a quarter and shifted by map -> odom
+    assert (odom.x, odom.y) == pytest.approx((0.5, 0.0))
+    assert (robot.x, robot.y, robot.theta) == pytest.approx((10.0, 5.5, np.pi / 2))
+    assert p.mount("laser", 0.5).x == pytest.approx(0.25)
+    assert p.mount("elsewhere", 0.5) is None
+
+
+def test_tf_poses_take_a_corrected_static_mount_and_stay_bounded():
+    from robot.ros_common.poses import TfPoses
+
+    p = TfPoses("map", "odom", "base_link", keep=5.0)
+    p.add(_edge(0.0, "base_link", "laser", 0.25, static=True))
+    p.add(_edge(0.0, "base_link", "laser", 0.40, static=True))      # corrected
+    assert p.mount("laser", 100.0).x == pytest.approx(0.40)
+    for k in range(2000):                        # 200 s of odometry at 10 Hz
+        p.add(_edge(0.1 * k, "odom", "base_link", 0.01 * k))
+    samples = p._edges["base_link"][1]
+    assert len(samples) <= 2 * 5.0 / 0.1 + 2     # about the last 2 x keep seconds
+    assert p.at(199.9)[1].x == pytest.approx(19.99)
+    assert p.mount("laser", 199.9).x == pytest.approx(0.40)         # static edges survive
+
+
+def test_the_scan_queue_drops_the_oldest_past_its_count_or_its_memory():
+    import array
+
+    from robot.ros_common.queue import ScanQueue, scan_bytes
+
+    q = ScanQueue(max_items=3, max_bytes=10**9)
+    assert [q.push(k, 10) for k in range(5)] == [0, 0, 0, 1, 1]
+    assert [q.pop() for _ in range(len(q))] == [2, 3, 4] and q.bytes == 0
+    big = scan_bytes(array.array("f", [1.0] * 250_000))          # rclpy: float32 array
+    assert big == 256 + 4 * 250_000
+    assert scan_bytes([1.0] * 1000, [0.5] * 1000) == 256 + 32 * 2000   # rospy: Python floats
+    q = ScanQueue(max_items=5000, max_bytes=5 * big)
+    dropped = sum(q.push(k, big) for k in range(100))
+    assert len(q) == 5 and dropped == 95 and q.bytes <= 5 * big
+    q = ScanQueue(max_items=10, max_bytes=1)                     # one scan past the bytes: kept
+    assert q.push("huge", big) == 0 and len(q) == 1

@@ -20,7 +20,6 @@ older than the tf buffer, a map of another resolution) is counted by kind and sk
 
 from __future__ import annotations
 
-import collections
 import threading
 import time
 from pathlib import Path
@@ -33,10 +32,11 @@ from localization.smoothing import PoseSmoother
 from robotlogs.rosbag import transform_pose
 
 from ..methods import make_method
-from ..pipeline import RobotPipeline
+from ..pipeline import RobotPipeline, warm_up
 from ..robot_config import load_robot_config
 from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
+from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import NodeSettings, node_settings, refuse_saving_over_the_map
 
@@ -74,10 +74,9 @@ class MapUpdaterNode:
         self.health = Health()
         self.pipeline = None
         self._lock = threading.Lock()            # the pipeline, the published map
-        self._queue: collections.deque = collections.deque()
+        self._queue = ScanQueue(settings.queue_size)
         self._wake = threading.Condition()
         self._published: np.ndarray | None = None
-        self._mounts: dict[str, Pose2D] = {}
         if reference is not None:
             self._adopt(reference)
 
@@ -86,14 +85,16 @@ class MapUpdaterNode:
         """Start afresh on ``reference``: new buffers, a new pose check (lock held or not
         needed)."""
 
+        self.pipeline = self._pipeline_on(reference)
+        self._published = None                   # publish the new map at the next period
+
+    def _pipeline_on(self, reference: OccupancyGrid) -> RobotPipeline:
         check = PoseCheck(reference, self.pose_check_config) \
             if self.settings.use_pose_check else None
         smoother = PoseSmoother(self.settings.smooth_poses) \
             if self.settings.smooth_poses > 0 else None
-        self.pipeline = RobotPipeline(make_method(self.settings.method, reference,
-                                                  self.updater_config),
-                                      pose_check=check, smoother=smoother)
-        self._published = None                   # publish the new map at the next period
+        return RobotPipeline(make_method(self.settings.method, reference, self.updater_config),
+                             pose_check=check, smoother=smoother)
 
     def _on_map(self, msg) -> None:
         try:
@@ -118,10 +119,8 @@ class MapUpdaterNode:
     def _on_scan(self, msg, topic: str) -> None:
         with self._wake:
             self.health.counts["scans_received"] += 1
-            if len(self._queue) >= self.settings.queue_size:
-                self._queue.popleft()
-                self.health.counts["scans_dropped_behind"] += 1
-            self._queue.append((msg, topic))
+            dropped = self._queue.push((msg, topic), scan_bytes(msg.ranges, msg.intensities))
+            self.health.counts["scans_dropped_behind"] += dropped
             self._wake.notify()
 
     def _work(self) -> None:
@@ -132,7 +131,7 @@ class MapUpdaterNode:
                     self._wake.wait(0.1)
                 if not self._queue:
                     continue
-                msg, topic = self._queue.popleft()
+                msg, topic = self._queue.pop()
             t0 = time.perf_counter()
             try:
                 self._handle(msg, topic)
@@ -178,18 +177,24 @@ class MapUpdaterNode:
         return robot, odom, mount
 
     def _lookup(self, parent: str, child: str, stamp) -> Pose2D:
-        rospy = self.ros["rospy"]
-        ts = self.tf.lookup_transform(parent, child, stamp,
-                                      rospy.Duration(self.settings.tf_timeout))
+        tf2 = self.ros["tf2_ros"]
+        try:
+            ts = self.tf.lookup_transform(parent, child, stamp)
+        except tf2.ExtrapolationException as e:
+            if "past" in str(e):
+                raise                   # it will never come: a stale scan costs no waiting
+            ts = self.tf.lookup_transform(parent, child, stamp,
+                                          self.ros["rospy"].Duration(self.settings.tf_timeout))
+        except tf2.TransformException:
+            ts = self.tf.lookup_transform(parent, child, stamp,
+                                          self.ros["rospy"].Duration(self.settings.tf_timeout))
         return transform_pose(ts.transform)
 
     def _mount(self, laser_frame: str) -> Pose2D:
         if laser_frame == self.settings.base_frame:
             return Pose2D(0.0, 0.0, 0.0)
-        if laser_frame not in self._mounts:      # a laser's mount is static: looked up once
-            self._mounts[laser_frame] = self._lookup(self.settings.base_frame, laser_frame,
-                                                     self.ros["rospy"].Time(0))
-        return self._mounts[laser_frame]
+        # the latest, at every scan: a corrected /tf_static counts from then on
+        return self._lookup(self.settings.base_frame, laser_frame, self.ros["rospy"].Time(0))
 
     def _skip(self, why: str, detail) -> None:
         self.health.skipped[why] += 1
@@ -287,6 +292,7 @@ class MapUpdaterNode:
     def start(self, subscribe_map: bool) -> None:
         r, s = self.ros, self.settings
         rospy, tf2 = r["rospy"], r["tf2_ros"]
+        warm_up(self._pipeline_on)
         self.tf = tf2.Buffer(rospy.Duration(10.0))
         self._listener = tf2.TransformListener(self.tf)
         self.map_pub = rospy.Publisher("map_updated", r["GridMsg"], queue_size=1, latch=True)

@@ -4,15 +4,21 @@ Nav2's map_server and amcl are, so that Nav2's lifecycle manager brings it up an
 - configure: the parameters (validated as the YAML configs are; a misspelt name fails the
   transition with the nearest valid one) and the reference map (``--map``, or the
   transient-local ``map`` topic as Nav2's map_server publishes it); the services.
-- activate: the subscriptions (scans with the sensor-data QoS lidars publish with, odometry,
-  amcl's pose) and the publications (``map_updated``, transient local, each
-  ``publish_period`` when it changed; ``/diagnostics``).
+- activate: the subscriptions (scans with the sensor-data QoS lidars publish with, and the
+  poses) and the publications (``map_updated``, transient local, each ``publish_period``
+  when it changed; ``map_updated_updates``, the box of cells changed since the last
+  publication, as the costmap's static layer reads with ``subscribe_to_updates``;
+  ``/diagnostics``).
 - deactivate, cleanup: stop those, then drop the map and the buffers.
 
-Poses: no wheel carries ``tf2_msgs``, so the node reads ``/amcl_pose`` with ``/odom`` (the
-``map -> odom`` amcl would publish, composed as the log replay composes it) and takes the
-laser's mount from the ``laser_mount`` parameter. Each scan waits for odometry past its stamp,
-so it is placed exactly where ``mapupdate update`` places it in the recording.
+Poses (``pose_source``): "tf", each scan's ``map -> odom -> base_frame -> laser`` from /tf
+and /tf_static at its stamp, as Nav2's nodes look them up; or "amcl_pose", ``/amcl_pose`` with
+``/odom`` (the ``map -> odom`` amcl would publish, composed as the log replay composes it) and
+the laser's mount from the ``laser_mount`` parameter. No wheel carries ``tf2_msgs`` or
+``map_msgs``: ``make ros2`` builds them from their definitions (``ros/build-ros2-msgs.sh``);
+without them the node needs ``pose_source:=amcl_pose`` and publishes no updates. Each scan
+waits for the odometry (and the localiser's correction) past its stamp, so it is placed
+exactly where ``mapupdate update`` places it in the recording.
 
 """
 
@@ -27,14 +33,16 @@ import numpy as np
 from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, load_map, save_map
 from localization.confidence import PoseCheck
 from localization.smoothing import PoseSmoother
-from robotlogs.rosbag import pose_pose, stamp_seconds
+from robotlogs.records import TransformRecord
+from robotlogs.rosbag import pose_pose, stamp_seconds, transform_pose
 
 from ..methods import make_method
-from ..pipeline import RobotPipeline
+from ..pipeline import RobotPipeline, warm_up
 from ..robot_config import load_robot_config
-from ..ros_common.grids import grid_from_message, message_fields
+from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
-from ..ros_common.poses import LivePoses
+from ..ros_common.poses import LivePoses, TfPoses
+from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import Ros2Settings, node_settings, refuse_saving_over_the_map
 from .parameters import declare_all, overrides_as_dict
@@ -58,9 +66,20 @@ try:
 except ImportError as e:  # a robot without the ROS 2 wheels: said in one line by the command
     raise MapUpdatingError(f"mapupdate ros2 needs ROS 2 Jazzy's Python packages ({e}): pip "
                            f"install 'lidar-map-updating[ros2]' (or {WHEELS})") from None
+try:                 # built from their definitions by `make ros2` (no wheel carries them)
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+try:
+    from map_msgs.msg import OccupancyGridUpdate
+except ImportError:
+    OccupancyGridUpdate = None
+NO_TF2_MSGS = ("pose_source 'tf' needs the tf2_msgs package, which has no wheel: `make ros2` "
+               "builds it (ros/build-ros2-msgs.sh), or set pose_source:=amcl_pose")
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)   # as tf2's listener
 SUCCESS, FAILURE = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
 
 
@@ -77,8 +96,11 @@ class MapUpdaterNode(LifecycleNode):
         self._reset_state()
 
     def _reset_state(self) -> None:
-        self.poses = LivePoses()
-        self._scans: list = []                  # (record, arrival) waiting for odometry
+        s = self.settings
+        self.poses = TfPoses(s.map_frame, s.odom_frame, s.base_frame) \
+            if s is not None and s.pose_source == "tf" else LivePoses()
+        # (record, arrival) waiting for their poses
+        self._scans = ScanQueue(self.settings.queue_size if self.settings else 1)
         self._published: np.ndarray | None = None
 
     # --- lifecycle ----------------------------------------------------------------------------
@@ -100,6 +122,8 @@ class MapUpdaterNode(LifecycleNode):
             self.settings, self.updater_config, self.pose_check_config = node_settings(
                 params, base, Ros2Settings)
             refuse_saving_over_the_map(self.settings.save_path, self.map_path)
+            if self.settings.pose_source == "tf" and TFMessage is None:
+                raise MapUpdatingError(NO_TF2_MSGS)
             declare_all(self, self.settings, self.updater_config, self.pose_check_config)
             reference = load_map(self.map_path) if self.map_path is not None else None
         except (MapUpdatingError, OSError) as e:
@@ -107,6 +131,8 @@ class MapUpdaterNode(LifecycleNode):
             self.get_logger().error(f"configure: {self.failure}")
             return FAILURE
         s = self.settings
+        self._reset_state()
+        warm_up(self._pipeline_on)
         self._configured = [self.create_service(Trigger, f"~/{name}", handler)
                             for name, handler in (("save", self._save),
                                                   ("commit", self._commit),
@@ -117,6 +143,8 @@ class MapUpdaterNode(LifecycleNode):
             self._configured.append(self.create_subscription(GridMsg, s.map_topic,
                                                              self._on_map, LATCHED))
         self.map_pub = self.create_lifecycle_publisher(GridMsg, "map_updated", LATCHED)
+        self.update_pub = None if OccupancyGridUpdate is None else \
+            self.create_lifecycle_publisher(OccupancyGridUpdate, "map_updated_updates", 10)
         self.diag_pub = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", 10)
         self.get_logger().info(f"configured ({self.map_path or 'waiting for ' + s.map_topic}; "
                                f"scans on {', '.join(s.scan_topics)})")
@@ -127,9 +155,15 @@ class MapUpdaterNode(LifecycleNode):
         subs = [self.create_subscription(LaserScan, topic, self._scan_handler(topic),
                                          qos_profile_sensor_data)
                 for topic in dict.fromkeys(s.scan_topics)]
-        subs.append(self.create_subscription(Odometry, s.odom_topic, self._on_odom, 50))
-        subs.append(self.create_subscription(PoseWithCovarianceStamped, s.pose_topic,
-                                             self._on_pose, LATCHED))
+        if s.pose_source == "tf":
+            subs.append(self.create_subscription(TFMessage, "/tf",
+                                                 lambda m: self._on_tf(m, False), TF_QOS))
+            subs.append(self.create_subscription(TFMessage, "/tf_static",
+                                                 lambda m: self._on_tf(m, True), LATCHED))
+        else:
+            subs.append(self.create_subscription(Odometry, s.odom_topic, self._on_odom, 50))
+            subs.append(self.create_subscription(PoseWithCovarianceStamped, s.pose_topic,
+                                                 self._on_pose, LATCHED))
         self._active = subs
         self._timer = self.create_timer(s.publish_period, self._publish)
         self._published = None                  # the map goes out at once on activation
@@ -151,6 +185,8 @@ class MapUpdaterNode(LifecycleNode):
         self._configured = []
         self.destroy_lifecycle_publisher(self.map_pub)
         self.destroy_lifecycle_publisher(self.diag_pub)
+        if self.update_pub is not None:
+            self.destroy_lifecycle_publisher(self.update_pub)
         self.pipeline = None
         self._reset_state()
         return SUCCESS
@@ -160,12 +196,15 @@ class MapUpdaterNode(LifecycleNode):
 
     # --- the map ------------------------------------------------------------------------------
     def _adopt(self, reference: OccupancyGrid) -> None:
+        self.pipeline = self._pipeline_on(reference)
+        self._published = None
+
+    def _pipeline_on(self, reference: OccupancyGrid) -> RobotPipeline:
         s = self.settings
         check = PoseCheck(reference, self.pose_check_config) if s.use_pose_check else None
         smoother = PoseSmoother(s.smooth_poses) if s.smooth_poses > 0 else None
-        self.pipeline = RobotPipeline(make_method(s.method, reference, self.updater_config),
-                                      pose_check=check, smoother=smoother)
-        self._published = None
+        return RobotPipeline(make_method(s.method, reference, self.updater_config),
+                             pose_check=check, smoother=smoother)
 
     def _on_map(self, msg) -> None:
         try:
@@ -195,6 +234,21 @@ class MapUpdaterNode(LifecycleNode):
         if not pose.is_finite():
             return self._skip("localisation not finite", pose)
         self.poses.add_localisation(stamp_seconds(msg.header), pose)
+        self._drain()
+
+    def _on_tf(self, msg, static: bool) -> None:
+        """One /tf or /tf_static message: all of its transforms or, one not finite, none."""
+        records = []
+        for tr in msg.transforms:
+            pose = transform_pose(tr.transform)
+            if not pose.is_finite():
+                return self._skip("transform not finite", f"{tr.child_frame_id}: {pose}")
+            records.append(TransformRecord(stamp_seconds(tr.header),
+                                           tr.header.frame_id.lstrip("/"),
+                                           tr.child_frame_id.lstrip("/"), pose, static=static))
+        for rec in records:
+            self.poses.add(rec)
+        self._drain()
 
     def _scan_handler(self, topic: str):
         return lambda msg: self._on_scan(msg, topic)
@@ -204,17 +258,15 @@ class MapUpdaterNode(LifecycleNode):
         rec, skip = usable_scan(msg, topic)
         if skip is not None:
             return self._skip(*skip)
-        if len(self._scans) >= self.settings.queue_size:
-            self._scans.pop(0)
-            self.health.counts["scans_dropped_behind"] += 1
-        self._scans.append((rec, time.perf_counter()))
+        self.health.counts["scans_dropped_behind"] += self._scans.push(
+            (rec, time.perf_counter()), scan_bytes(rec.scan.ranges))
         self._drain()
 
     def _drain(self, force: bool = False) -> None:
         """Place and use every waiting scan the odometry has passed (all of them, ``force``,
         when the odometry has stopped for longer than ``tf_timeout``)."""
-        while self._scans and (force or self.poses.ready(self._scans[0][0].time)):
-            rec, arrival = self._scans.pop(0)
+        while self._scans and (force or self.poses.ready(self._scans.first()[0].time)):
+            rec, arrival = self._scans.pop()
             t0 = time.perf_counter()
             try:
                 self._use(rec)
@@ -232,7 +284,14 @@ class MapUpdaterNode(LifecycleNode):
         robot, odom = self.poses.at(rec.time)
         if robot is None:
             return self._skip("no localisation or odometry at the scan's time", rec.time)
-        mount = Pose2D(*self.settings.laser_mount)
+        if self.settings.pose_source == "tf":
+            # looked up at every scan: a corrected /tf_static counts from then on
+            mount = self.poses.mount(rec.frame_id.lstrip("/"), rec.time)
+            if mount is None:
+                return self._skip("no transform from the base to the scan's frame",
+                                  rec.frame_id)
+        else:
+            mount = Pose2D(*self.settings.laser_mount)
         self.pipeline.step(rec.scan, mount, odometry=odom, pose=robot)
         self.health.counts["scans_used"] += 1
 
@@ -244,14 +303,18 @@ class MapUpdaterNode(LifecycleNode):
 
     # --- output -------------------------------------------------------------------------------
     def _publish(self) -> None:
-        if self._scans and time.perf_counter() - self._scans[0][1] > self.settings.tf_timeout:
+        if self._scans and time.perf_counter() - self._scans.first()[1] > self.settings.tf_timeout:
             self._drain(force=True)             # the odometry stopped: use what waits
         counts = {}
         if self.pipeline is not None:
             grid = self.pipeline.updater.updated_map()
             counts = pipeline_values(self.pipeline, self.settings.method)
-            if self._published is None or not np.array_equal(self._published, grid.data):
+            before = self._published
+            if before is None or not np.array_equal(before, grid.data):
                 self.map_pub.publish(self._grid_msg(grid))
+                box = None if before is None else changed_box(before, grid.data)
+                if box is not None and self.update_pub is not None:
+                    self.update_pub.publish(self._update_msg(box, grid))
                 self._published = grid.data
                 self.health.counts["maps_published"] += 1
         self._diagnostics(counts)
@@ -267,6 +330,15 @@ class MapUpdaterNode(LifecycleNode):
         msg.info.origin.position.x, msg.info.origin.position.y = f["origin"]
         msg.info.origin.orientation.w = 1.0
         msg.data = f["data"]
+        return msg
+
+    def _update_msg(self, box, grid: OccupancyGrid):
+        x, y, w, h = box
+        msg = OccupancyGridUpdate()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.settings.map_frame
+        msg.x, msg.y, msg.width, msg.height = x, y, w, h
+        msg.data = grid.data[y:y + h, x:x + w].reshape(-1).tolist()
         return msg
 
     def _diagnostics(self, counts: dict) -> None:

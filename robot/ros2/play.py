@@ -1,10 +1,13 @@
 """Replays a recording into a ROS 2 graph, as a robot's drivers and amcl would send it, for a
-machine without ``ros2 bag``: LaserScan on /scan (sensor-data QoS), Odometry on /odom,
-PoseWithCovarianceStamped on /amcl_pose (transient local, as Nav2's amcl), in the recording's
-time order, at ``--rate`` times real time, with the recording's stamps. It starts once every
-topic has a subscriber (a scan sent before would be lost).
+machine without ``ros2 bag``: LaserScan on /scan (sensor-data QoS) and the poses, by
+``--poses``: "tf", the recording's /tf and, first and latched, its /tf_static (what the node's
+default ``pose_source`` reads; needs the tf2_msgs package ``make ros2`` builds); or
+"amcl_pose", Odometry on /odom and PoseWithCovarianceStamped on /amcl_pose (transient local, as
+Nav2's amcl). In the recording's time order, at ``--rate`` times real time, with the
+recording's stamps. It starts once every topic has a subscriber (a scan sent before would be
+lost).
 
-    python -m robot.ros2.play BAG [--rate 1]
+    python -m robot.ros2.play BAG [--rate 1] [--poses tf|amcl_pose]
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from sensor_msgs.msg import LaserScan
 
 from gridmap import MapUpdatingError
-from robotlogs.records import OdomRecord, PoseRecord, ScanRecord
+from robotlogs.records import OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import read_bag
 
 
@@ -63,22 +66,69 @@ def amcl_msg(r: PoseRecord) -> PoseWithCovarianceStamped:
     return m
 
 
-def main(bag: str, rate: float) -> int:
-    if not (math.isfinite(rate) and 0 < rate <= 1000):
-        raise MapUpdatingError(f"--rate must be a number in (0, 1000], got {rate:g}")
-    kinds = (ScanRecord, OdomRecord, PoseRecord)
-    records = [r for r in read_bag(bag, kinds=("scan", "odom", "pose")) if type(r) in kinds]
-    if not records:
-        raise MapUpdatingError(f"{bag}: no scans, odometry or poses to play")
-    rclpy.init()
-    node = rclpy.create_node("recording_player")
+def tf_msg(records):
+    from tf2_msgs.msg import TFMessage
+    from geometry_msgs.msg import TransformStamped
+    m = TFMessage()
+    for r in records:
+        t = TransformStamped()
+        stamp(t.header, r.time)
+        t.header.frame_id, t.child_frame_id = r.parent, r.child
+        t.transform.translation.x, t.transform.translation.y = float(r.pose.x), float(r.pose.y)
+        t.transform.rotation.z = math.sin(r.pose.theta / 2)
+        t.transform.rotation.w = math.cos(r.pose.theta / 2)
+        m.transforms.append(t)
+    return m
+
+
+def _publishers(node, poses: str) -> dict:
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                          reliability=ReliabilityPolicy.RELIABLE)
     pubs = {ScanRecord: (node.create_publisher(LaserScan, "scan", qos_profile_sensor_data),
-                         scan_msg),
-            OdomRecord: (node.create_publisher(Odometry, "odom", 50), odom_msg),
-            PoseRecord: (node.create_publisher(PoseWithCovarianceStamped, "amcl_pose",
-                                               latched), amcl_msg)}
+                         scan_msg)}
+    if poses == "tf":
+        from tf2_msgs.msg import TFMessage
+        pubs[TransformRecord] = (node.create_publisher(TFMessage, "/tf", 100),
+                                 lambda r: tf_msg([r]))
+        pubs["static"] = (node.create_publisher(TFMessage, "/tf_static", latched), tf_msg)
+    else:
+        pubs[OdomRecord] = (node.create_publisher(Odometry, "odom", 50), odom_msg)
+        pubs[PoseRecord] = (node.create_publisher(PoseWithCovarianceStamped, "amcl_pose",
+                                                  latched), amcl_msg)
+    return pubs
+
+
+def _records(bag: str, poses: str) -> tuple[list, list]:
+    """(the records to play in order, the static transforms)"""
+    if poses not in ("tf", "amcl_pose"):
+        raise MapUpdatingError(f"--poses must be tf or amcl_pose, got {poses!r}")
+    if poses == "tf":
+        try:
+            import tf2_msgs.msg  # noqa: F401
+        except ImportError:
+            raise MapUpdatingError("--poses tf needs the tf2_msgs package, which has no "
+                                   "wheel: `make ros2` builds it") from None
+    kinds = ("scan", "tf") if poses == "tf" else ("scan", "odom", "pose")
+    types = (ScanRecord, TransformRecord) if poses == "tf" else \
+        (ScanRecord, OdomRecord, PoseRecord)
+    records = [r for r in read_bag(bag, kinds=kinds) if type(r) in types]
+    static = [r for r in records if isinstance(r, TransformRecord) and r.static]
+    records = [r for r in records if not (isinstance(r, TransformRecord) and r.static)]
+    if not any(isinstance(r, ScanRecord) for r in records) or len(records) < 2:
+        raise MapUpdatingError(f"{bag}: no scans and poses to play (--poses {poses})")
+    return records, static
+
+
+def main(bag: str, rate: float, poses: str = "tf") -> int:
+    if not (math.isfinite(rate) and 0 < rate <= 1000):
+        raise MapUpdatingError(f"--rate must be a number in (0, 1000], got {rate:g}")
+    records, static = _records(bag, poses)
+    rclpy.init()
+    node = rclpy.create_node("recording_player")
+    pubs = _publishers(node, poses)
+    if static:
+        pub, convert = pubs.pop("static")
+        pub.publish(convert(static))
     # discovery: a scan sent before the node's subscription matched would be lost
     end = time.monotonic() + 60
     while any(pub.get_subscription_count() == 0 for pub, _ in pubs.values()):
@@ -105,9 +155,11 @@ if __name__ == "__main__":
                                  description="replay a recording into a ROS 2 graph")
     ap.add_argument("bag", help="ROS 1 bag or ROS 2 bag folder")
     ap.add_argument("--rate", type=float, default=1.0, help="times real time (1)")
+    ap.add_argument("--poses", default="tf", choices=("tf", "amcl_pose"),
+                    help="/tf and /tf_static (tf), or /odom and /amcl_pose")
     a = ap.parse_args()
     try:
-        sys.exit(main(a.bag, a.rate))
+        sys.exit(main(a.bag, a.rate, a.poses))
     except (MapUpdatingError, OSError) as e:
         print(f"robot.ros2.play: error: {' '.join(str(e).split())}", file=sys.stderr)
         sys.exit(2)

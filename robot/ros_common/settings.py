@@ -24,6 +24,7 @@ from ..robot_config import ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config, 
 # A ROS topic name (ROS 1 and 2 agree on these): relative, absolute or private
 TOPIC_NAME = re.compile(r"[~/]?/?[A-Za-z][A-Za-z0-9_/]*")
 TOPIC_FIELDS = ("map_topic", "odom_topic", "pose_topic")
+POSE_SOURCES = ("tf", "amcl_pose")
 
 
 class NodeSettingsError(MapUpdatingError, ValueError):
@@ -81,17 +82,23 @@ class NodeSettings:
 
 @dataclass(frozen=True)
 class Ros2Settings(NodeSettings):
-    """The ROS 2 node's parameters: the ROS 1 node's, and where its poses come from. No wheel
-    carries tf2_msgs, so the node reads amcl's pose and the odometry, as amcl composes its
-    map -> odom, and takes the laser's mount on the robot from a parameter."""
+    """The ROS 2 node's parameters: the ROS 1 node's, and where its poses come from:
+    ``pose_source`` "tf" (``map -> odom -> base_frame -> laser`` from /tf and /tf_static, as
+    Nav2's nodes take them), or "amcl_pose" (amcl's pose with the odometry, composed as amcl
+    composes its map -> odom, and the laser's mount from ``laser_mount``), for a graph whose
+    tf2_msgs cannot be had."""
 
-    odom_topic: str = "odom"             # nav_msgs/Odometry
-    pose_topic: str = "amcl_pose"        # geometry_msgs/PoseWithCovarianceStamped
-    laser_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)   # [m, m, rad] on base_frame
+    pose_source: str = "tf"              # "tf" or "amcl_pose"
+    odom_topic: str = "odom"             # nav_msgs/Odometry (pose_source amcl_pose)
+    pose_topic: str = "amcl_pose"        # PoseWithCovarianceStamped (pose_source amcl_pose)
+    laser_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)   # [m, m, rad] (amcl_pose)
     autostart: bool = False              # configure and activate at once (no lifecycle manager)
 
     def __post_init__(self):
         super().__post_init__()
+        if self.pose_source not in POSE_SOURCES:
+            raise NodeSettingsError(f"parameter 'pose_source' must be one of "
+                                    f"{', '.join(POSE_SOURCES)}, got {self.pose_source!r}")
         for name in ("odom_topic", "pose_topic"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise NodeSettingsError(f"parameter '{name}' must be a non-empty string, got "

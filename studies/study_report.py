@@ -20,6 +20,7 @@ import numpy as np
 
 from gridmap import FREE, OCCUPIED, MapUpdatingError, load_map
 from gridmap.atomic import write_atomically, write_with
+from gridmap.files import FileInputError, read_text
 from scenarios.report import _pyplot
 
 
@@ -106,9 +107,12 @@ def collect(out_dir) -> tuple[list[dict], list[str]]:
 
 def _json(path: Path, what: str, missing: str = "missing") -> dict:
     try:
-        data = json.loads(path.read_text())
+        # read_text: a FIFO or a device put in a study's place is refused, not read forever
+        data = json.loads(read_text(path, what))
     except FileNotFoundError:
         raise StudyFolderError(f"{path.parent}: {missing} (no {path.name})") from None
+    except FileInputError as e:
+        raise StudyFolderError(str(e)) from None
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
         raise StudyFolderError(f"{path}: unreadable {what} ({type(e).__name__}: "
                                f"{' '.join(str(e).split())[:160]})") from None

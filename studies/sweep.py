@@ -21,41 +21,62 @@ would give it, in its own folder ``DIR/runs/<key>/``; when it ends, its rows go 
 so a killed sweep resumes. Generated scenarios are written once to ``DIR/scenarios/``. At the
 end ``scenarios.study_report`` writes ``DIR/results.csv``, ``DIR/summary.md`` and the box
 plots.
+
+A study folder belongs to one spec, as a run folder belongs to one run: a sweep of another
+spec into it is refused (``sweep.json`` keeps the checked spec), and a second sweep into it at
+the same moment is refused by ``DIR/state/lock``. The pool's workers die with the sweep, even
+a sweep killed with SIGKILL. A spec file that is not a small text file (a FIFO, a device, over
+256 KB) or whose YAML aliases expand without bound is refused before it is parsed or expanded.
 """
 
 from __future__ import annotations
 
+import ctypes
 import json
 import multiprocessing
 import os
 import re
 import shutil
+import signal
+import sys
+import threading
 import time
+from contextlib import contextmanager
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-import yaml
 from tqdm import tqdm
 
 import sim
 from gridmap import MapUpdatingError
 from gridmap.atomic import write_atomically
+from gridmap.files import (MAX_TEXT_BYTES, FileInputError, check_regular_file, parse_yaml,
+                           read_text)
 from gridmap.suggest import did_you_mean
 from robot.methods import check_method
 from robot.robot_config import CLASSES, SECTIONS, load_robot_config, section_config
 from scenarios.catalog import find_scenario
-from scenarios.checkpoint import _sha256
+from scenarios.checkpoint import ResumeError, RunFolderLock, _sha256
 from scenarios.generator import check_arguments, write_generated
-from scenarios.runner import RunOptions, run_scenario
+from scenarios.runner import MAX_SEED, RunOptions, run_scenario
 
-from .study_report import RUN_KEY_CHARS, session_rows, summarise
+from .study_report import RUN_KEY_CHARS, StudyFolderError, _json, session_rows, summarise
 from .sweep_ray import check_address, ray_tasks, require_ray
 
 SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
 # The most runs one spec may ask for (the study of 20 warehouses x 3 seeds x 5 methods is 300;
 # what a run costs is in benchmarks/RESULTS.md).
 MAX_RUNS = 10_000
+# A spec is a few hundred bytes and 10 000 seeds take 60 KB; YAML is parsed at about 100 KB/s,
+# so a bigger file is refused before it is parsed, within a second.
+MAX_SPEC_BYTES = 256 * 1024
+MAX_SESSIONS = 10_000              # as many as a scenario file may list
+MAX_PATH_CHARS = 4096              # PATH_MAX of Linux
+PR_SET_PDEATHSIG = 1               # <linux/prctl.h>
+PARENT_POLL = 0.5                  # [s] how often a worker without it checks on its parent
+# What a study folder holds before its sweep.json is written (a sweep killed while planning).
+STUDY_ENTRIES = ("runs", "scenarios", "state")
 GENERATE_KEYS = ("seeds", "size", "sessions", "fov")
 RESULT_FORMAT = 1
 
@@ -86,8 +107,23 @@ class RunSpec:
 
 
 # --- the spec --------------------------------------------------------------------------------
+def _show(value, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters: a message stays one short line whatever
+    the spec holds (a list of 80 000 seeds, an integer of 5000 digits)."""
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):     # more digits than Python prints; a nest too deep
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _one_line(text: str, limit: int = 400) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _fail(source: str, key: str, message: str):
-    raise SweepError(f"{source}: {key}: {message}" if key else f"{source}: {message}")
+    raise SweepError(_one_line(f"{source}: {key}: {message}" if key else f"{source}: {message}"))
 
 
 def _nonempty_list(value, source: str, key: str) -> list:
@@ -98,12 +134,14 @@ def _nonempty_list(value, source: str, key: str) -> list:
     return value
 
 
-def _integers(value, source: str, key: str, minimum: int = 0) -> list[int]:
+def _integers(value, source: str, key: str, minimum: int = 0,
+              maximum: int = MAX_SEED) -> list[int]:
     for j, v in enumerate(_nonempty_list(value, source, key)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
-            _fail(source, f"{key}[{j}]", f"expected an integer >= {minimum}, got {v!r}")
+        if isinstance(v, bool) or not isinstance(v, int) or not minimum <= v <= maximum:
+            _fail(source, f"{key}[{j}]", f"expected an integer in [{minimum}, {maximum}], got "
+                                         f"{_show(v)}")
     if len(set(value)) != len(value):
-        _fail(source, key, f"a value is listed twice: {value}")
+        _fail(source, key, f"a value is listed twice: {_show(value)}")
     return list(value)
 
 
@@ -112,65 +150,111 @@ def _check_keys(node, known, source: str, key: str) -> dict:
         _fail(source, key, f"expected a mapping, got {type(node).__name__}")
     for k in node:
         if k not in known:
-            _fail(source, f"{key}.{k}" if key else str(k),
-                  f"unknown key {k!r}{did_you_mean(k, known)} (keys: {', '.join(known)})")
+            name = k if isinstance(k, str) and len(k) <= 60 and k.isprintable() else _show(k)
+            hint = did_you_mean(k, known) if isinstance(k, str) else ""
+            _fail(source, f"{key}.{name}" if key else name,
+                  f"unknown key {_show(k)}{hint} (keys: {', '.join(known)})")
     return node
 
 
 def load_spec(path) -> dict:
-    """The spec of ``path``, checked; raises ``SweepError`` at the first problem."""
+    """The spec of ``path``, checked; raises ``SweepError`` at the first problem, within
+    seconds whatever the file is (a FIFO, a device, an alias bomb, megabytes of seeds)."""
     path = Path(path)
-    source = str(path)
     try:
-        spec = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise SweepError(f"{path}: sweep spec not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SweepError(f"{path}: cannot read the sweep spec ({e})") from None
-    except yaml.YAMLError as e:
-        raise SweepError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None
+        spec = parse_yaml(read_text(path, "sweep spec", MAX_SPEC_BYTES), str(path), SweepError)
+    except SweepError:
+        raise
+    except (FileNotFoundError, FileInputError) as e:
+        raise SweepError(str(e)) from None
+    except (ValueError, TypeError, OverflowError) as e:
+        # a value YAML's own constructors refuse (2001-13-45, !!float x, an int of 5000 digits)
+        raise SweepError(f"{path}: not valid YAML ({type(e).__name__}: "
+                         f"{_one_line(e, 160)})") from None
+    return check_spec(spec, str(path), path.parent)
+
+
+def check_spec(spec, source: str, base: Path) -> dict:
+    """The spec with defaults filled in and every entry checked (see the module docstring);
+    ``SweepError`` naming ``source`` and the key for anything else."""
+    try:
+        return _checked_spec(spec, source, Path(base))
+    except SweepError:
+        raise
+    except MapUpdatingError as e:
+        raise SweepError(_one_line(e)) from None
+    except (TypeError, ValueError, OverflowError, RecursionError, OSError) as e:
+        # a value of a kind no check above foresaw still ends in one line, never a traceback
+        raise SweepError(f"{source}: a value cannot be used ({type(e).__name__}: "
+                         f"{_one_line(e, 160)})") from None
+
+
+def _checked_spec(spec, source: str, base: Path) -> dict:
     spec = _check_keys(spec, SPEC_KEYS, source, "")
     if "scenarios" not in spec:
         _fail(source, "scenarios", "missing required key")
-    return check_spec(spec, source, path.parent)
-
-
-def check_spec(spec: dict, source: str, base: Path) -> dict:
-    """The spec with defaults filled in and every entry checked (see the module docstring)."""
-    out = {"scenarios": [_scenario_entry(s, source, f"scenarios[{j}]", base)
-                         for j, s in enumerate(_nonempty_list(spec["scenarios"], source,
-                                                              "scenarios"))]}
+    _count_runs(spec, source)       # before any entry is checked: that costs per entry
+    out = {"scenarios": _scenarios(spec["scenarios"], source, base)}
     out["seeds"] = _integers(spec["seeds"], source, "seeds") if "seeds" in spec else [None]
-    methods = _nonempty_list(spec.get("methods", ["paper"]), source, "methods")
-    for j, m in enumerate(methods):
-        check_method(m, f"{source}: methods[{j}]")
-    if len(set(methods)) != len(methods):
-        _fail(source, "methods", f"a method is listed twice: {methods}")
-    out["methods"] = list(methods)
+    out["methods"] = _methods(spec.get("methods", ["paper"]), source)
     out["quick"] = spec.get("quick", False)
     if not isinstance(out["quick"], bool):
-        _fail(source, "quick", f"expected true or false, got {out['quick']!r}")
-    out["sessions"] = spec.get("sessions")
-    if out["sessions"] is not None:
-        _integers([out["sessions"]], source, "sessions", minimum=1)
+        _fail(source, "quick", f"expected true or false, got {_show(out['quick'])}")
+    out["sessions"] = n = spec.get("sessions")
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or
+                          not 1 <= n <= MAX_SESSIONS):
+        _fail(source, "sessions", f"expected an integer in [1, {MAX_SESSIONS}], got {_show(n)}")
     out["config"] = _base_config(spec.get("config"), source)
     out["grid"] = _grid(spec.get("grid"), out["config"], source)
-    _count_runs(out, source)
     return out
+
+
+def _scenarios(entries, source: str, base: Path) -> list[dict]:
+    out, seen = [], set()
+    for j, entry in enumerate(_nonempty_list(entries, source, "scenarios")):
+        checked = _scenario_entry(entry, source, f"scenarios[{j}]", base)
+        text = json.dumps(checked, sort_keys=True)
+        if text in seen:
+            _fail(source, f"scenarios[{j}]", f"{_show(entry)} is listed twice")
+        seen.add(text)
+        out.append(checked)
+    return out
+
+
+def _methods(methods, source: str) -> list[str]:
+    seen = []
+    for j, m in enumerate(_nonempty_list(methods, source, "methods")):
+        if not isinstance(m, str) or len(m) > 60:
+            _fail(source, f"methods[{j}]", f"expected a method name, got {_show(m)}")
+        check_method(m, f"{source}: methods[{j}]")
+        if m in seen:
+            _fail(source, "methods", f"a method is listed twice: {_show(methods)}")
+        seen.append(m)
+    return seen
 
 
 def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
     if isinstance(entry, str):
-        local = base / entry
-        try:
-            path = find_scenario(local if local.is_file() else entry)
-        except MapUpdatingError as e:
-            _fail(source, key, str(e))
-        return {"file": str(path)}
+        return {"file": _scenario_file(entry, source, key, base)}
     node = _check_keys(entry, ("generate",), source, key)
     if "generate" not in node:
         _fail(source, key, "expected a scenario name or path, or {generate: {...}}")
     return {"generate": _generate_entry(node["generate"], source, f"{key}.generate")}
+
+
+def _scenario_file(entry: str, source: str, key: str, base: Path) -> str:
+    """The resolved path of a scenario named or given by path (beside the spec first), a
+    regular file: a folder, a FIFO or a device is refused now, not once the sweep started."""
+    if not entry or "\x00" in entry or len(entry) > MAX_PATH_CHARS:
+        _fail(source, key, f"not a scenario name or path: {_show(entry)}")
+    try:
+        local = base / entry
+        # any file beside the spec (a FIFO too, refused just below), never a folder there
+        path = find_scenario(local if local.exists() and not local.is_dir() else entry)
+        check_regular_file(path, "scenario file", MAX_TEXT_BYTES)
+        return str(path.resolve())
+    except (MapUpdatingError, OSError) as e:   # FileNotFoundError, a name too long for the OS
+        _fail(source, key, str(e))
 
 
 def _generate_entry(node, source: str, key: str) -> dict:
@@ -195,7 +279,7 @@ def _base_config(node, source: str) -> dict:
     try:
         return load_robot_config(node, source=f"{source}: config").to_dict()
     except MapUpdatingError as e:
-        raise SweepError(str(e)) from None
+        raise SweepError(_one_line(e)) from None
 
 
 def _grid(node, config: dict, source: str) -> dict:
@@ -209,7 +293,9 @@ def _grid(node, config: dict, source: str) -> dict:
     if not node:
         _fail(source, "grid", "the mapping is empty (leave 'grid' out for no grid)")
     for key, values in node.items():
-        section, _, name = str(key).partition(".")
+        if not isinstance(key, str) or len(key) > 60 or not key.isprintable():
+            _fail(source, "grid", f"a grid key is <section>.<key>, got {_show(key)}")
+        section, _, name = key.partition(".")
         where = f"grid.{key}"
         if section not in SECTIONS or not name:
             _fail(source, where, f"a grid key is <section>.<key> with a section of "
@@ -222,20 +308,27 @@ def _grid(node, config: dict, source: str) -> dict:
             try:
                 section_config(section, {**config.get(section, {}), name: v}, source, where)
             except MapUpdatingError as e:
-                raise SweepError(str(e)) from None
+                raise SweepError(_one_line(e)) from None
         if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
-            _fail(source, where, f"a value is listed twice: {values}")
+            _fail(source, where, f"a value is listed twice: {_show(values)}")
     return dict(node)
 
 
 def _count_runs(spec: dict, source: str) -> int:
-    """The runs a checked spec asks for, counted before any is planned; more than ``MAX_RUNS``
-    is refused (a slip of a digit in a seed range or a grid)."""
-    scenarios = sum(len(s["generate"]["seeds"]) if "generate" in s else 1
-                    for s in spec["scenarios"])
-    n = scenarios * len(spec["seeds"]) * len(spec["methods"])
-    for values in spec["grid"].values():
-        n *= len(values)
+    """The runs a spec asks for, counted from its lists' lengths before any entry is checked
+    (each check costs, and YAML aliases make long lists of a few bytes); more than
+    ``MAX_RUNS`` is refused (a slip of a digit in a seed range or a grid)."""
+    def length(value) -> int:
+        return max(len(value), 1) if isinstance(value, list) else 1
+
+    scenarios = 0
+    for entry in spec["scenarios"] if isinstance(spec["scenarios"], list) else [None]:
+        generate = entry.get("generate") if isinstance(entry, dict) else None
+        scenarios += length(generate.get("seeds")) if isinstance(generate, dict) else 1
+    n = scenarios * length(spec.get("seeds")) * length(spec.get("methods"))
+    grid = spec.get("grid")
+    for values in grid.values() if isinstance(grid, dict) else ():
+        n *= length(values)
     if n > MAX_RUNS:
         _fail(source, "", f"the spec asks for {n} runs, more than {MAX_RUNS} (scenarios x seeds "
                           f"x methods x grid points); split it into several studies")
@@ -376,7 +469,8 @@ def _pool(runs, runs_dir, workers: int):
     """Yield (run, record) as the runs finish on a pool of ``workers`` processes."""
     # spawn: a fresh interpreter per worker, whatever threads the parent runs
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                             initializer=_end_with_parent, initargs=(os.getpid(),)) as pool:
         pending = {pool.submit(execute, run, str(runs_dir)): run for run in runs}
         try:
             while pending:
@@ -387,6 +481,39 @@ def _pool(runs, runs_dir, workers: int):
         finally:
             for future in pending:
                 future.cancel()
+
+
+def _end_with_parent(parent: int, kernel: bool = True) -> None:
+    """A pool worker's first call: the worker ends soon after the sweep ``parent`` that started
+    it, even a sweep killed with SIGKILL, which leaves its pool no chance to stop the workers
+    (they would play their runs to the end for nobody, holding CPUs and run folders). On Linux
+    the kernel kills the worker with its parent; elsewhere (or with ``kernel`` False) a thread
+    ends it within ``PARENT_POLL`` seconds of the parent's death."""
+    if not (kernel and _kill_with_parent()):
+        threading.Thread(target=_watch_parent, args=(parent,), name="watch-parent",
+                         daemon=True).start()
+    if os.getppid() != parent:          # the parent died before the worker got here
+        os._exit(1)
+
+
+def _kill_with_parent() -> bool:
+    """Ask Linux to SIGKILL this process when its parent dies; False where it cannot."""
+    # (the parent's thread that started the worker, in fact: the pool starts its workers
+    # from the sweep's main thread, which lives as long as the sweep)
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch_parent(parent: int) -> None:
+    # an orphan is adopted by init (or a subreaper): its parent's pid changes
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL)
+    os._exit(1)
 
 
 def _progress(enabled: bool, **kw):
@@ -412,20 +539,70 @@ def run_sweep(spec_path, out, workers: int | None = None, ray: str | None = None
         require_ray()
         check_address(ray)              # before anything is written
     out = Path(out)
-    runs_dir = out / "runs"
-    runs_dir.mkdir(parents=True, exist_ok=True)
-    runs = plan(spec, out, progress)
-    done = {run.key for run in runs if finished(run, runs_dir) is not None}
-    write_atomically(out / "sweep.json", json.dumps(
-        {"format": RESULT_FORMAT, "spec": spec, "runs": [r.key for r in runs]}, indent=1) + "\n")
-    todo = [run for run in runs if run.key not in done]
-    workers = default_workers() if workers is None else workers
-    with _progress(progress, total=len(runs), initial=len(done), desc="runs") as bar:
-        for run, _record in _dispatch(todo, runs_dir, workers, ray):
-            bar.set_postfix_str(run.key[-40:], refresh=False)
-            bar.update(1)
-    summarise(out)
+    check_study_folder(out, spec)       # before anything is written
+    with study_lock(out):
+        check_study_folder(out, spec)   # again: another sweep may have claimed it meanwhile
+        runs_dir = out / "runs"
+        runs_dir.mkdir(parents=True, exist_ok=True)
+        runs = plan(spec, out, progress)
+        done = {run.key for run in runs if finished(run, runs_dir) is not None}
+        write_atomically(out / "sweep.json", json.dumps(
+            {"format": RESULT_FORMAT, "spec": spec, "runs": [r.key for r in runs]},
+            indent=1) + "\n")
+        todo = [run for run in runs if run.key not in done]
+        workers = default_workers() if workers is None else workers
+        with _progress(progress, total=len(runs), initial=len(done), desc="runs") as bar:
+            for run, _record in _dispatch(todo, runs_dir, workers, ray):
+                bar.set_postfix_str(run.key[-40:], refresh=False)
+                bar.update(1)
+        summarise(out)
     return len(runs)
+
+
+# --- the study folder ------------------------------------------------------------------------
+def check_study_folder(out: Path, spec: dict) -> None:
+    """A study folder holds one study: a new folder, or one whose ``sweep.json`` has this very
+    spec (as checked, so a spec file moved, reformatted or commented resumes its study). Any
+    other is refused: its results.csv would be replaced by this spec's, its rows gone."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        _fail(str(out), "", "exists and is not a folder; --out names the study's folder")
+    record = out / "sweep.json"
+    if not record.exists():
+        others = sorted(p.name for p in out.iterdir()
+                        if p.name not in STUDY_ENTRIES and not p.name.startswith("."))
+        if others:
+            _fail(str(out), "", f"holds files that are not a study's ({_show(others)}); use a "
+                                "new or empty folder for --out")
+        return
+    try:
+        old = _json(record, "study file").get("spec")
+    except StudyFolderError as e:
+        raise SweepError(f"{e}; use another --out") from None
+    new = json.loads(json.dumps(spec))      # as sweep.json reads back
+    if old != new:
+        differ = [k for k in SPEC_KEYS if not isinstance(old, dict) or old.get(k) != new.get(k)]
+        _fail(str(out), "", f"holds the study of another spec (its {', '.join(differ) or 'keys'}"
+                            " differ); a folder holds one study: use another --out")
+
+
+@contextmanager
+def study_lock(out: Path):
+    """Hold ``out/state/lock`` while the sweep writes into ``out``: a second sweep into the
+    same folder at the same moment is refused. The lock of a run folder: an advisory flock
+    the kernel drops when the sweep dies, so a killed sweep leaves no stale lock."""
+    lock = RunFolderLock(out)
+    try:
+        lock.__enter__()
+    except ResumeError:
+        holder = _one_line(lock.path.read_text(errors="replace"), 60) or "another process"
+        raise SweepError(f"{out}: another sweep is writing into this study folder ({holder}); "
+                         "wait for it or use another --out") from None
+    try:
+        yield lock
+    finally:
+        lock.__exit__(None, None, None)
 
 
 def _dispatch(todo, runs_dir, workers: int, ray: str | None):

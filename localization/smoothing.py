@@ -12,10 +12,11 @@ objects' outlines drawn, 0.99-1.00 once smoothed).
 odometry at the scan. Each recorded pose of the last ``window`` seconds, carried to this scan by
 the odometry since it (``recorded_j (+) (odom_j^-1 (+) odom_k)``), predicts the pose now; the
 mean of the predictions (the circular mean for the heading) is the pose used. Only past scans
-count, so a live robot does the same. A recorded pose farther than ``jump`` metres or
-``jump_deg`` degrees from the window's prediction is a relocalisation, not jitter: the window
-starts again from it, so a corrected pose is used at once rather than blended in over the
-window.
+count, so a live robot does the same; at most ``MAX_POSES`` of them, the latest, so that
+stamps which do not advance cost no more per scan than a full window. A recorded pose farther
+than ``jump`` metres or ``jump_deg`` degrees from the window's prediction is a relocalisation,
+not jitter: the window starts again from it, so a corrected pose is used at once rather than
+blended in over the window.
 
 Only a localisation that jitters is smoothed, judged on the window's own poses, each recorded
 pose against an earlier one carried by the odometry (the innovation):
@@ -56,6 +57,12 @@ MOVED = 1e-4            # [m, rad] a recorded pose this far from the last one ca
 MAX_GROWTH = 3.0        # ... and the mean squared innovation at half the window's length is
                         # at most this many times the one at one scan
 MIN_POSES = 8           # poses in the window before any is smoothed
+# The most poses the window keeps, whatever its length: stamps that do not advance (a bag or a
+# driver that repeats one stamp) never empty a window of seconds, and each scan's work grows
+# with the window (3000 scans at one stamp took 55 s, quadratic). 128 predictions already cut
+# the jitter 11-fold; older poses only add the odometry's drift. The default window holds
+# fewer at any lidar rate up to 64 Hz (20 at 10 Hz).
+MAX_POSES = 128
 
 
 class PoseSmoother:
@@ -82,7 +89,8 @@ class PoseSmoother:
         if recorded is None or odom is None or not self.window > 0 or \
                 not (recorded.is_finite() and odom.is_finite() and math.isfinite(time)):
             return recorded
-        self._past = [p for p in self._past if time - self.window < p[0] <= time]
+        self._past = [p for p in self._past
+                      if time - self.window < p[0] <= time][-(MAX_POSES - 1):]
         step = _innovation(self._past[-1], recorded, odom) if self._past else None
         if self._past and self._jumped(self._predict(odom), recorded):
             self._past = []

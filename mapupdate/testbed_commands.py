@@ -15,7 +15,7 @@ from scenarios.checkpoint import ResumeError
 from scenarios.generator import write_generated
 from scenarios.observers import Observers
 from scenarios.runner import RunOptions, run_scenario
-from scenarios.session_bags import SessionBagRecorder
+from scenarios.session_bags import SessionBagRecorder, check_bag_folder
 
 from .extras import require
 
@@ -65,15 +65,17 @@ def run(args) -> int:
 
 
 def _check_run_outputs(args) -> None:
-    """Before anything is written: a new run's folder is new or empty (never a folder holding
-    other files), and the recording goes over none of the run's inputs (the scenario, the
-    configuration, a resumed run's state)."""
+    """Before anything is written: a new run's folder, and its bag folder, are new or empty
+    (never a folder holding other files), and the recording goes over none of the run's inputs
+    (the scenario, the configuration, a resumed run's state)."""
     if args.resume is None and args.out is not None and Path(args.out).is_dir():
         others = sorted(p.name for p in Path(args.out).iterdir())
         if others and not (Path(args.out) / "state").is_dir():    # a run's: the run decides
             raise OutputClash(f"--out {args.out}: holds other files ({', '.join(others[:3])}"
                               f"{', ...' if len(others) > 3 else ''}); a run goes into a new "
                               "or empty folder")
+    if args.bag is not None:
+        check_bag_folder(args.bag, resume=args.resume is not None)
     if args.rerun is not None:
         inputs = {"scenario": [find_scenario(args.scenario)],
                   "--config": [args.config] if args.config else []}

@@ -25,14 +25,19 @@ an invalid beam (NaN in the scan), the line's other beams are kept, and such ran
 logs) are invalid beams too, being below the scan's ``range_min``.
 
 A file that starts with gzip's magic bytes (``killian.clf.gz``) is read through gzip.
+Lines longer than ``MAX_LINE_BYTES``, and a gzip file that expands to more than
+``GZIP_MAX_RATIO`` times its size (and ``GZIP_MIN_LIMIT``), are refused with a ``LogError``
+as soon as the reading passes the bound, before the memory fills or the reading takes hours.
 """
 
 from __future__ import annotations
 
 import gzip
+import itertools
 import math
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,12 +47,22 @@ from gridmap import Pose2D, Scan
 from gridmap.types import GridError
 
 from .records import LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRecord
+from .rosbag import check_angle_increment
 
 # The SICK LMS reports 8183 cm when no echo came back; CARMEN logs keep that value.
 FLASER_NO_RETURN = 81.83
 # Readings below 1 cm are the lidar's error codes (dazzle, no measurement), not obstacles.
 RANGE_MIN = 0.01
 GZIP_MAGIC = b"\x1f\x8b"
+# A line holds at most 2 x 100 000 numbers (ranges and remissions, the counts' bound below),
+# far less than this in any real log (2 KB in the Radish logs); a line without an end, or one
+# of gigabytes, is refused when it passes this instead of filling the memory.
+MAX_LINE_BYTES = 8 * 1024 * 1024
+# Text logs compress 3 to 6 times (the Radish and Killian logs); gzip can reach 1000 times on
+# one repeated line, so a small file may expand to gigabytes of comments that take hours to
+# read. The reading stops at this many times the file's size, or GZIP_MIN_LIMIT bytes if more.
+GZIP_MAX_RATIO = 100
+GZIP_MIN_LIMIT = 64 * 1024 * 1024
 
 OLD_LASERS = {"FLASER": "front_laser", "RLASER": "rear_laser"}
 ROBOT_LASERS = {"ROBOTLASER1": "laser1", "ROBOTLASER2": "laser2"}
@@ -95,8 +110,8 @@ def read_carmen(path, *, strict: bool = False,
     """
     path = Path(path)
     try:
-        with open_text(path) as f:
-            log = parse_carmen(f, source=str(path), strict=strict,
+        with open_lines(path) as lines:
+            log = parse_carmen(lines, source=str(path), strict=strict,
                                flaser_no_return=flaser_no_return)
     except (IsADirectoryError, FileNotFoundError, PermissionError):
         raise
@@ -114,11 +129,41 @@ def is_gzip(path) -> bool:
         return f.read(2) == GZIP_MAGIC
 
 
-def open_text(path):
-    """The log at ``path`` as text lines, through gzip when it is compressed."""
+@contextmanager
+def open_lines(path):
+    """The log at ``path`` as text lines, through gzip when it is compressed, each line at most
+    ``MAX_LINE_BYTES`` and a gzip file's content at most ``gzip_limit`` bytes; past either
+    bound the iteration raises ``LogError`` naming the file."""
+    path = Path(path)
     if is_gzip(path):
-        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
-    return Path(path).open("r", encoding="utf-8", errors="replace")
+        limit, f = gzip_limit(path), gzip.open(path, "rb")
+    else:
+        limit, f = None, path.open("rb")    # a plain file is as long as the disk holds
+    with f:
+        yield _bounded_lines(f, path, limit)
+
+
+def gzip_limit(path) -> int:
+    """The most bytes a gzip log at ``path`` may expand to (see ``GZIP_MAX_RATIO``)."""
+    return max(GZIP_MIN_LIMIT, GZIP_MAX_RATIO * Path(path).stat().st_size)
+
+
+def _bounded_lines(f, path: Path, limit: int | None) -> Iterator[str]:
+    total = 0
+    for lineno in itertools.count(1):
+        # one byte more than a line may hold, so that a longer line shows without being read
+        line = f.readline(MAX_LINE_BYTES + 1)
+        if not line:
+            return
+        if len(line) > MAX_LINE_BYTES:
+            raise LogError(f"{path}, line {lineno}: longer than {MAX_LINE_BYTES} bytes, where a "
+                           "CARMEN line is a few KB; refused")
+        total += len(line)
+        if limit is not None and total > limit:
+            raise LogError(f"{path}: the gzip file expands to more than {limit} bytes, over "
+                           f"{GZIP_MAX_RATIO} times its size where a log compresses 3 to 6 "
+                           "times (a gzip bomb?); refused")
+        yield line.decode("utf-8", errors="replace")
 
 
 def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool = False,
@@ -311,7 +356,8 @@ def _check_trailing(words: list[str], end: int) -> None:
 def _scan(ranges: np.ndarray, angle_min: float, increment: float, range_min: float,
           range_max: float, time: float, name: str) -> Scan:
     try:
+        check_angle_increment(float(increment))     # as the LaserScan a robot would send
         return Scan(ranges.astype(np.float32), float(angle_min), float(increment),
                     float(range_min), float(range_max), float(time))
-    except GridError as e:
+    except (GridError, LogError) as e:
         raise _LineProblem("bad value", f"{name}: {e}") from None

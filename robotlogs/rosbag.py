@@ -35,6 +35,10 @@ TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 POSE_TYPES = (POSE_COV, POSE_STAMPED, ODOMETRY)
 # The (x, y, yaw) entries of a row-major 6 x 6 ROS covariance (x y z roll pitch yaw).
 COV_INDEX = np.array([0, 1, 5])
+# [rad] A LaserScan's angle_increment is a float32, which holds nothing smaller: a message built
+# with less (5e-324 from Python, a CARMEN line's resolution) would arrive as 0, and the
+# updater's angular window over it comes out infinite.
+MIN_ANGLE_INCREMENT = float(np.finfo(np.float32).smallest_subnormal)
 
 
 @dataclass(frozen=True)
@@ -222,11 +226,14 @@ def scan_record(msg, topic: str) -> ScanRecord:
     """A ``sensor_msgs/LaserScan`` as a record: the same conversion for a bag's messages
     (rosbags) and a live node's (rospy). Raises ``LogError`` for a message that cannot be a
     scan (bad angles or range limits, a beam count that does not reach angle_max)."""
-    ranges = np.array(msg.ranges, dtype=np.float32)
-    # ROS: readings beyond range_max (and +inf) mean nothing was hit within range.
-    with np.errstate(invalid="ignore"):
+    # A reading or range_max past float32 (1e300, from a rospy message built in Python) is
+    # inf, as a driver's float32 field would hold it: no warning for each such message.
+    with np.errstate(invalid="ignore", over="ignore"):
+        ranges = np.array(msg.ranges, dtype=np.float32)
+        # ROS: readings beyond range_max (and +inf) mean nothing was hit within range.
         ranges[ranges >= msg.range_max] = np.inf
     t = stamp_seconds(msg.header)
+    check_angle_increment(float(msg.angle_increment))
     try:
         scan = Scan(ranges, float(msg.angle_min), float(msg.angle_increment),
                     float(msg.range_min), float(msg.range_max), t)
@@ -241,6 +248,14 @@ def scan_record(msg, topic: str) -> ScanRecord:
                        f"angle_min {float(msg.angle_min):g} do not reach angle_max "
                        f"{float(msg.angle_max):g} (wrong beam count)")
     return ScanRecord(t, scan, frame_id=msg.header.frame_id.lstrip("/"), topic=topic)
+
+
+def check_angle_increment(increment: float) -> None:
+    """Raise ``LogError`` for a nonzero angle increment [rad] below ``MIN_ANGLE_INCREMENT``
+    (0, NaN and inf are left to ``Scan``, which names them)."""
+    if 0 < abs(increment) < MIN_ANGLE_INCREMENT:
+        raise LogError(f"angle_increment {increment:g} rad is below the {MIN_ANGLE_INCREMENT:g} "
+                       "a LaserScan's float32 can hold")
 
 
 def _pose_record(msg, msgtype: str, topic: str) -> PoseRecord:

@@ -18,6 +18,7 @@ import shutil
 from pathlib import Path
 
 from gridmap import Pose2D
+from robot.outputs import OutputClash
 from robotlogs.records import MapRecord, OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
 
@@ -31,6 +32,24 @@ def lidar_frame(index: int) -> str:
 
 def lidar_topic(index: int) -> str:
     return "/scan" if index == 0 else f"/scan_{index}"
+
+
+def check_bag_folder(out_dir, resume: bool = False) -> None:
+    """Before a run: its bags go into a new or empty folder, since each session's bag replaces
+    any of its name there (another run's ``W2.bag``); a resumed run's folder holds its own
+    finished bags, which it keeps. Raises ``OutputClash`` naming the folder."""
+    folder = Path(out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise OutputClash(f"--bag {folder}: is a file, not a folder; the bags go into a new or "
+                          "empty folder")
+    if resume or not folder.is_dir():
+        return
+    others = sorted(p.name for p in folder.iterdir())
+    if others:
+        raise OutputClash(f"--bag {folder}: holds other files ({', '.join(others[:3])}"
+                          f"{', ...' if len(others) > 3 else ''}), which this run's bags would "
+                          "overwrite; the bags go into a new or empty folder (or --resume the "
+                          "run that wrote them)")
 
 
 class SessionBagRecorder:

@@ -440,12 +440,62 @@ class MapUpdater:
             raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
         updater = cls(grid, config)
         updater._restore_buffers(path, hist, hits, seen)
+        _check_gate_state(path, meta["gate"])
         try:
             updater._gate.restore(meta["gate"])
         except (ValueError, TypeError) as e:
             raise UpdaterError(f"{path}: {e}") from None
-        try:
-            updater._counts = {k: int(meta["counts"][k]) for k in updater._counts}
-        except (KeyError, TypeError, ValueError) as e:
-            raise UpdaterError(f"{path}: scan counts unreadable: {e}") from None
+        updater._counts = _saved_counts(path, meta["counts"], updater._counts)
         return updater
+
+
+# The gate's saved times and poses: each group is all NaN (no such scan yet) or all finite.
+_GATE_GROUPS = {"last": ("last_t", "last_x", "last_y", "last_th"),
+                "processed": ("proc_t", "proc_x", "proc_y", "proc_th")}
+
+
+def _check_gate_state(path, gate) -> None:
+    """Refuse a saved gate that would shut for ever: JSON carries Infinity and NaN, and an
+    infinite last time (or a NaN one beside a pose) makes every later scan look too soon or
+    unmoved, so the next recording would process nothing and say only that it was gated."""
+    if not isinstance(gate, dict):
+        raise UpdaterError(f"{path}: the saved gate is not a mapping: {gate!r:.60}")
+    state = {"turn_swept": 0.0, **gate}     # states saved before the rule had none
+
+    def number(key, none_yet=True):
+        value = state.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or math.isinf(value) or (math.isnan(value) and not none_yet):
+            raise UpdaterError(f"{path}: the saved gate's {key} must be a finite number"
+                               f"{' (or NaN: none yet)' if none_yet else ''}, got "
+                               f"{value!r:.40}")
+        return float(value)
+
+    for name, keys in _GATE_GROUPS.items():
+        nan = [math.isnan(number(k)) for k in keys]
+        if any(nan) and not all(nan):
+            raise UpdaterError(f"{path}: the saved gate's {name} scan is part NaN "
+                               f"({', '.join(f'{k}={state[k]!r}' for k in keys)})")
+    for key in ("travel", "turn_swept"):
+        if number(key, none_yet=False) < 0:
+            raise UpdaterError(f"{path}: the saved gate's {key} must be >= 0, got {state[key]!r}")
+    if not isinstance(state.get("idle"), bool) or state.get("source") not in (
+            "", "odometry", "localised"):
+        raise UpdaterError(f"{path}: the saved gate's idle {state.get('idle')!r:.20} or source "
+                           f"{state.get('source')!r:.40} is not the gate's")
+    # shut after a fast turn at no time, the gate would never open again
+    number("idle_t", none_yet=not state["idle"])
+
+
+def _saved_counts(path, saved, counts: dict) -> dict:
+    """The saved scan counts, each a whole number >= 0."""
+    try:
+        out = {k: saved[k] for k in counts}
+    except (KeyError, TypeError) as e:
+        raise UpdaterError(f"{path}: scan counts unreadable: {e}") from None
+    for key, value in out.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not (math.isfinite(value) and value >= 0 and value == int(value)):
+            raise UpdaterError(f"{path}: the saved scan count {key} must be a whole number "
+                               f">= 0, got {value!r}")
+    return {k: int(v) for k, v in out.items()}

@@ -107,6 +107,17 @@ def read_map_values(path) -> tuple[np.ndarray, MapMetadata]:
     return values[::-1], meta
 
 
+def _beside(path: Path, image: str) -> Path:
+    """A relative image: beside the YAML as named, as map_server and ``save_map`` place it
+    (a YAML reached through a link has its image beside the link); else beside the file the
+    link points at."""
+    named = path.absolute().parent / image
+    if named.exists():
+        return named
+    real = path.resolve().parent / image
+    return real if real.exists() else named
+
+
 def read_map_yaml(path) -> MapMetadata:
     """Read and validate a map_server YAML file."""
     path = Path(path)
@@ -126,7 +137,7 @@ def read_map_yaml(path) -> MapMetadata:
     image = doc["image"]
     if not isinstance(image, str) or not image:
         raise MapFileError(f"{path}: key 'image' must be a file name, got {image!r}")
-    image_path = Path(image) if os.path.isabs(image) else path.resolve().parent / image
+    image_path = Path(image) if os.path.isabs(image) else _beside(path, image)
     resolution = _number(path, "resolution", doc["resolution"])
     if not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
         raise MapFileError(f"{path}: resolution must be in [{MIN_RESOLUTION:g}, "

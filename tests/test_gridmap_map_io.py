@@ -241,3 +241,19 @@ def test_trinary_image_is_the_saved_image_north_up(tmp_path):
     assert (PIXEL_OCCUPIED, PIXEL_UNKNOWN, PIXEL_FREE) == (0, 205, 254)
     _, pgm = save_map(grid, tmp_path / "m.yaml")
     assert pgm.read_bytes().endswith(img.tobytes())
+
+
+def test_a_map_reached_through_a_link_loads_wherever_its_image_was_put(tmp_path):
+    import os
+
+    for sub in ("a", "b", "c"):
+        (tmp_path / sub).mkdir()
+    free = OccupancyGrid(np.zeros((4, 5), np.int8), 0.05)
+    save_map(free, tmp_path / "b/real.yaml")                  # image beside the real file
+    os.symlink(tmp_path / "b/real.yaml", tmp_path / "a/link.yaml")
+    assert np.array_equal(load_map(tmp_path / "a/link.yaml").data, free.data)
+    walls = OccupancyGrid(np.full((4, 5), 100, np.int8), 0.05)
+    os.symlink(tmp_path / "c/target.yaml", tmp_path / "a/out.yaml")
+    save_map(walls, tmp_path / "a/out.yaml")                  # image beside the link, as map_saver
+    assert (tmp_path / "a/out.pgm").exists() and (tmp_path / "c/target.yaml").exists()
+    assert np.array_equal(load_map(tmp_path / "a/out.yaml").data, walls.data)

@@ -347,13 +347,14 @@ scans.publish(scan(t0 + 0.05, [1.0] * 101, increment=0.0))       # angles that g
 scans.publish(scan(t0 + 0.06, []))                               # no beams
 scans.publish(scan(t0 + 0.07, [math.nan] * 50 + [2.0] * 51))     # NaN beams: invalid, used
 scans.publish(scan(t0 + 0.08, [2.0] * 101, increment=1e-12))     # 1e11 beams' window: clamped
+scans.publish(scan(0.0, [2.0] * 101))                             # stamped 0: said, skipped
 o = stamped(Odometry(), t0 + 0.3)
 odom.publish(pose(o, o.pose.pose, 0.03))
 end = time.monotonic() + 30
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.2)
     values = seen.get(f"/{node_name}: health", {})
-    if values.get("scans_received") == "4" and values.get("scans_used") == "2":
+    if values.get("scans_received") == "5" and values.get("scans_used") == "2":
         break
 print(json.dumps(values))
 """
@@ -367,6 +368,7 @@ def test_malformed_traffic_is_counted_and_skipped_never_a_crash(graph, recording
     values = json.loads(graph.script(BAD_TRAFFIC, name, timeout=120).strip().splitlines()[-1])
     assert values["skipped: malformed scan"] == "1"
     assert values["skipped: empty scan"] == "1"
+    assert values["skipped: scan stamped 0"] == "1"
     assert values["skipped: odometry not finite"] == "1"
     assert values["skipped: localisation not finite"] == "1"
     assert values["scans_with_bad_ranges"] == "1" and values["scans_used"] == "2"

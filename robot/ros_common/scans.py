@@ -17,6 +17,9 @@ def usable_scan(msg, topic: str):
         return None, ("malformed scan", e)
     if rec.scan.beams == 0:
         return None, ("empty scan", topic)
+    if rec.time == 0.0:
+        # no time to look its poses up at (ROS 1 reads 0 as "the latest"), nor to gate by
+        return None, ("scan stamped 0", topic)
     return rec, None
 
 

@@ -9,6 +9,7 @@ $(BIN)/mapupdate: pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/python -m mapupdate.warm || echo "(kernels not compiled ahead: the first run compiles them)"
 	touch $@
 
 setup: $(BIN)/mapupdate

@@ -17,7 +17,13 @@ KEY_SPAN = 1 << 21
 
 @njit(cache=True)
 def wrap(a):
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+    """``(a + pi) % (2 pi) - pi``, as NumPy and Python wrap an angle to [-pi, pi)."""
+    t = a + math.pi
+    # fmod(t, 2 pi) is t itself for 0 < t < 2 pi, where nearly every angle lies, and a call
+    # to fmod costs more than the rest of a bin key
+    if 0.0 < t < 2.0 * math.pi:
+        return t - math.pi
+    return t % (2.0 * math.pi) - math.pi
 
 
 @njit(cache=True)
@@ -45,26 +51,58 @@ def sensor_in_map(pose, mount):
             c * cm - s * sm, s * cm + c * sm)
 
 
+# Particles scored per block: the block's sensor poses, indices and sums stay in the L1 cache.
+SCORE_BLOCK = 256
+
+
 @njit(cache=True)
 def likelihood_field(poses, mount, beams, table, frame, off_value, base, out):
     """Likelihood-field score of every particle: ``out[i] = base + sum_j table[cell of beam j's
     end point]`` (AMCL: base 1 and pz^3 per cell; or base 0 and log pz). ``beams`` (B, 2) are
     the end points in the sensor frame [m], ``mount`` the sensor in the robot frame, ``frame`` =
     (origin x, origin y, resolution); end points off the grid score ``off_value``. Rotating the
-    precomputed beam vectors avoids any trigonometry per beam."""
-    h, w = table.shape
-    ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
-    for i in range(poses.shape[0]):
-        sx, sy, cs, ss = sensor_in_map(poses[i], mount)
-        p = base
+    precomputed beam vectors avoids any trigonometry per beam.
+
+    Beams are the outer loop and a block of particles the inner one: the cell arithmetic then
+    runs over independent particles, which the compiler turns into vector code, while each
+    particle's sum still adds its beams in beam order, so the scores are those of a beam-by-beam
+    loop to the bit."""
+    n = poses.shape[0]
+    pose_block = np.empty((4, SCORE_BLOCK))
+    cells = np.empty(SCORE_BLOCK, np.int64)
+    acc = np.empty(SCORE_BLOCK)
+    flat = table.ravel()
+    for start in range(0, n, SCORE_BLOCK):
+        m = min(SCORE_BLOCK, n - start)
+        for k in range(m):
+            sx, sy, cs, ss = sensor_in_map(poses[start + k], mount)
+            pose_block[0, k], pose_block[1, k], pose_block[2, k], pose_block[3, k] = sx, sy, cs, ss
+            acc[k] = base
         for j in range(beams.shape[0]):
-            gx = (sx + cs * beams[j, 0] - ss * beams[j, 1] - ox) * inv_res
-            gy = (sy + ss * beams[j, 0] + cs * beams[j, 1] - oy) * inv_res
-            if gx >= 0.0 and gy >= 0.0 and gx < w and gy < h:
-                p += table[int(gy), int(gx)]
-            else:
-                p += off_value
-        out[i] = p
+            beam_cells(pose_block, m, beams[j, 0], beams[j, 1], frame, table.shape, cells)
+            for k in range(m):
+                c = cells[k]
+                if c >= 0:
+                    acc[k] += flat[c]
+                else:
+                    acc[k] += off_value
+        out[start:start + m] = acc[:m]
+
+
+@njit(cache=True)
+def beam_cells(pose_block, m, bx, by, frame, shape, cells):
+    """The flat cell index of the end point (bx, by) seen from each of the first ``m`` sensor
+    poses of ``pose_block`` (rows x, y, cos, sin), -1 off the grid. Kept free of loads from the
+    table so that it vectorises; the arithmetic is the one ``likelihood_field`` always used."""
+    h, w = shape
+    ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
+    fw, fh = float(w), float(h)
+    for k in range(m):
+        sx, sy, cs, ss = pose_block[0, k], pose_block[1, k], pose_block[2, k], pose_block[3, k]
+        gx = (sx + cs * bx - ss * by - ox) * inv_res
+        gy = (sy + ss * bx + cs * by - oy) * inv_res
+        inside = (gx >= 0.0) & (gy >= 0.0) & (gx < fw) & (gy < fh)
+        cells[k] = np.int64(gy) * w + np.int64(gx) if inside else -1
 
 
 @njit(cache=True)
@@ -93,13 +131,30 @@ def interpolated_fit(poses, mount, beams, residual, frame, out):
 
 
 @njit(cache=True)
+def bin_key(pose, bin_size, n_theta):
+    """The KLD histogram bin of one pose as one int64 key; theta bins wrap around."""
+    ix = min(max(math.floor(pose[0] / bin_size[0]), -KEY_OFFSET), KEY_OFFSET - 1)
+    iy = min(max(math.floor(pose[1] / bin_size[1]), -KEY_OFFSET), KEY_OFFSET - 1)
+    it = min(int((wrap(pose[2]) + math.pi) / bin_size[2]), n_theta - 1)
+    return ((ix + KEY_OFFSET) * KEY_SPAN + (iy + KEY_OFFSET)) * n_theta + it
+
+
+@njit(cache=True)
 def bin_keys(poses, bin_size, n_theta, out):
-    """The KLD histogram bin of every pose as one int64 key; theta bins wrap around."""
+    """The KLD histogram bin of every pose as one int64 key."""
     for i in range(poses.shape[0]):
-        ix = min(max(math.floor(poses[i, 0] / bin_size[0]), -KEY_OFFSET), KEY_OFFSET - 1)
-        iy = min(max(math.floor(poses[i, 1] / bin_size[1]), -KEY_OFFSET), KEY_OFFSET - 1)
-        it = min(int((wrap(poses[i, 2]) + math.pi) / bin_size[2]), n_theta - 1)
-        out[i] = ((ix + KEY_OFFSET) * KEY_SPAN + (iy + KEY_OFFSET)) * n_theta + it
+        out[i] = bin_key(poses[i], bin_size, n_theta)
+
+
+@njit(cache=True)
+def hash_slot(table, key):
+    """The slot of ``key`` in the open-addressing set ``table`` (power-of-two length, -1 for
+    empty), or the empty slot where it would go."""
+    mask = table.shape[0] - 1
+    h = ((key * 2654435761) ^ (key >> 16)) & mask
+    while table[h] != -1 and table[h] != key:
+        h = (h + 1) & mask
+    return h
 
 
 @njit(cache=True)
@@ -164,3 +219,141 @@ def cluster_bins(keys, n_theta, labels):
     for i in range(keys.shape[0]):
         labels[i] = bin_label[np.searchsorted(ukeys, keys[i])]
     return count
+
+
+@njit(cache=True)
+def kld_take(poses, order, bin_size, n_theta, pf_err, pf_z, min_n, max_n, table, out):
+    """KLD-sampling in one pass: copy ``poses[order[m]]`` to ``out[m]`` for m = 0, 1, ... and
+    stop where ``kld_sample_count`` on their bin keys would; returns that count. Only the kept
+    samples are copied. ``table`` is an open-addressing set of length >= 2 len(order) (power of
+    two, all -1) and is left all -1 again."""
+    k = 0
+    n = min(order.shape[0], max_n)
+    used = np.empty(n, np.int64)
+    taken = n
+    limit = max_n               # resample_limit's bound for no bin yet; it changes only with k
+    for m in range(n):
+        src = order[m]
+        for d in range(3):
+            out[m, d] = poses[src, d]
+        key = bin_key(out[m], bin_size, n_theta)
+        h = hash_slot(table, key)
+        if table[h] == -1:
+            table[h] = key
+            used[k] = h
+            k += 1
+            limit = resample_limit(k, pf_err, pf_z, min_n, max_n)
+        if m + 1 > limit:
+            taken = m + 1
+            break
+    table[used[:k]] = -1
+    return taken
+
+
+@njit(cache=True)
+def systematic_take(cum, u, count, out):
+    """Systematic resampling's indices into ``out`` (count,): the first index whose cumulative
+    weight ``cum`` exceeds (u + k) / count, found by one merge walk since both rise. Returns
+    False, writing nothing, where ``cum`` does not rise (a rounded sum above 1 before its last
+    entry, which is set to exactly 1), so the caller keeps a binary search's answer."""
+    nc = cum.shape[0]
+    for i in range(nc - 1):
+        if cum[i + 1] < cum[i]:
+            return False
+    j = 0
+    for k in range(count):
+        p = (u + k) / count
+        while j < nc and cum[j] <= p:
+            j += 1
+        out[k] = j
+    return True
+
+
+@njit(cache=True)
+def join_bins(bkeys, n_theta, table, ids):
+    """Union-find over the occupied bins ``bkeys`` (each in the set ``table``, its index in
+    ``ids`` at the same slot): bins that touch (26-neighbours, theta wrapping) share a root, and
+    each root is the bin of least key in its group."""
+    nb = bkeys.shape[0]
+    # int32, as the map updater's union-finds: find_root is then compiled once for both
+    parent = np.arange(nb).astype(np.int32)
+    for b in range(nb):
+        it = bkeys[b] % n_theta
+        cell = bkeys[b] // n_theta
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dt in range(-1, 2):
+                    nkey = (cell + dx * KEY_SPAN + dy) * n_theta + (it + dt) % n_theta
+                    if nkey < 0:        # -1 marks an empty slot; no bin has a negative key
+                        continue
+                    h = hash_slot(table, nkey)
+                    if table[h] != nkey:
+                        continue
+                    ra, rb = find_root(parent, b), find_root(parent, ids[h])
+                    if ra != rb:
+                        if bkeys[ra] < bkeys[rb]:
+                            parent[rb] = ra
+                        else:
+                            parent[ra] = rb
+    return parent
+
+
+@njit(cache=True)
+def cluster_particles(poses, weights, bin_size, n_theta, table, labels):
+    """AMCL's clusters in one pass over the particles, as ``cluster_bins`` of their
+    ``bin_keys`` labels them (clusters numbered in the order of their least bin key), without
+    sorting: bins are found in the set ``table`` (see ``kld_take``; left all -1 again). Writes
+    ``labels`` (N,) and returns each cluster's summed weight and particle count, the sums taken
+    in particle order as ``np.bincount`` takes them."""
+    n = poses.shape[0]
+    ids = np.empty(table.shape[0], np.int64)
+    bkeys = np.empty(n, np.int64)
+    slots = np.empty(n, np.int64)
+    nb = 0
+    for i in range(n):
+        key = bin_key(poses[i], bin_size, n_theta)
+        h = hash_slot(table, key)
+        if table[h] == -1:
+            table[h], ids[h], bkeys[nb], slots[nb] = key, nb, key, h
+            nb += 1
+        labels[i] = ids[h]
+    parent = join_bins(bkeys[:nb], n_theta, table, ids)
+    table[slots[:nb]] = -1
+    root = np.empty(nb, np.int64)
+    for b in range(nb):
+        root[b] = find_root(parent, b)
+    roots = np.flatnonzero(root == np.arange(nb))
+    root_label = np.empty(nb, np.int64)
+    root_label[roots[np.argsort(bkeys[roots])]] = np.arange(roots.shape[0])
+    share = np.zeros(roots.shape[0])
+    counts = np.zeros(roots.shape[0], np.int64)
+    for i in range(n):
+        lab = root_label[root[labels[i]]]
+        labels[i] = lab
+        share[lab] += weights[i]
+        counts[lab] += 1
+    return share, counts
+
+
+@njit(cache=True)
+def take_label(poses, weights, labels, label, out_poses, out_weights):
+    """The particles of cluster ``label``, in order, into ``out_poses`` and ``out_weights``."""
+    c = 0
+    for i in range(poses.shape[0]):
+        if labels[i] == label:
+            for d in range(3):
+                out_poses[c, d] = poses[i, d]
+            out_weights[c] = weights[i]
+            c += 1
+
+
+@njit(cache=True)
+def centred(poses, mean, weights, d, dw):
+    """``d = poses - mean`` with the heading wrapped, and ``dw = d * weights[:, None]``: the
+    same per-element arithmetic as the NumPy expressions, in one pass."""
+    for i in range(poses.shape[0]):
+        d[i, 0] = poses[i, 0] - mean[0]
+        d[i, 1] = poses[i, 1] - mean[1]
+        d[i, 2] = wrap(poses[i, 2] - mean[2])
+        for k in range(3):
+            dw[i, k] = d[i, k] * weights[i]

@@ -2,7 +2,8 @@
 
 Clusters are AMCL's: particles fall into the KLD histogram's bins (0.5 m x 0.5 m x 10 deg),
 and bins that touch (26-neighbourhood, heading wrapping around) form one cluster. AMCL finds
-them through its kd-tree; here a sort, a binary search per neighbour and a union-find do it.
+them through its kd-tree; here a hash set of the occupied bins, a look-up per neighbour and a
+union-find do it, in one kernel that also sums each cluster's weight.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from gridmap import Pose2D, wrap_angle
 
-from .resample import KldParameters, histogram_keys
+from .resample import KldParameters, Scratch, hash_table
 
 
 def _kernels():
@@ -46,9 +47,16 @@ class Estimate:
 
 def cluster_labels(poses: np.ndarray, kld: KldParameters) -> tuple[np.ndarray, int]:
     """Cluster index (N,) of each pose and the number of clusters."""
+    labels, share, _ = _clusters(poses, np.zeros(poses.shape[0]), kld, None)
+    return labels, int(share.size)
+
+
+def _clusters(poses, weights, kld, scratch):
+    """(labels (N,), summed weight per cluster, particle count per cluster)."""
     labels = np.empty(poses.shape[0], np.int64)
-    count = _kernels().cluster_bins(histogram_keys(poses, kld), kld.n_theta, labels)
-    return labels, int(count)
+    share, counts = _kernels().cluster_particles(
+        poses, weights, kld.bin_size, kld.n_theta, hash_table(poses.shape[0], scratch), labels)
+    return labels, share, counts
 
 
 def weighted_mean_cov(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,17 +65,26 @@ def weighted_mean_cov(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarra
     w = weights / weights.sum()
     theta = math.atan2(float(w @ np.sin(poses[:, 2])), float(w @ np.cos(poses[:, 2])))
     mean = np.array([w @ poses[:, 0], w @ poses[:, 1], theta])
-    d = poses - mean
-    d[:, 2] = wrap_angle(d[:, 2])
-    cov = (d * w[:, None]).T @ d
-    return mean, cov
+    if poses.dtype != np.float64 or w.dtype != np.float64:
+        d = poses - mean
+        d[:, 2] = wrap_angle(d[:, 2])
+        return mean, (d * w[:, None]).T @ d
+    # the deviations in one kernel pass, then the same matrix product on the same arrays
+    d, dw = np.empty(poses.shape), np.empty(poses.shape)
+    _kernels().centred(poses, mean, w, d, dw)
+    return mean, dw.T @ d
 
 
-def estimate(poses: np.ndarray, weights: np.ndarray, kld: KldParameters):
+def estimate(poses: np.ndarray, weights: np.ndarray, kld: KldParameters,
+             scratch: Scratch | None = None):
     """(mean (3,), cov (3, 3), weight share) of the heaviest cluster of particles."""
-    labels, count = cluster_labels(poses, kld)
-    share = np.bincount(labels, weights=weights, minlength=count)
+    labels, share, counts = _clusters(poses, weights, kld, scratch)
     best = int(np.argmax(share))
-    sel = labels == best
-    mean, cov = weighted_mean_cov(poses[sel], weights[sel])
+    if share.size == 1 and poses.flags.c_contiguous and weights.flags.c_contiguous:
+        sel_poses, sel_weights = poses, weights        # the copy a selection would make
+    else:
+        sel_poses = np.empty((counts[best], 3), poses.dtype)
+        sel_weights = np.empty(counts[best], weights.dtype)
+        _kernels().take_label(poses, weights, labels, best, sel_poses, sel_weights)
+    mean, cov = weighted_mean_cov(sel_poses, sel_weights)
     return mean, cov, float(share[best] / share.sum())

@@ -19,7 +19,8 @@ from gridmap import FREE, OccupancyGrid, Pose2D, Scan
 from .config import LocalizationError, LocalizerConfig
 from .estimate import Estimate, estimate
 from .motion import sample_motion
-from .resample import KldParameters, Recovery, kld_resample, log_sum_exp, normalise, temper
+from .resample import (KldParameters, Recovery, Scratch, kld_resample, log_sum_exp, normalise,
+                       temper)
 from .sensor import LikelihoodField, likelihood_field, select_beams
 
 IDENTITY = Pose2D(0.0, 0.0, 0.0)
@@ -54,6 +55,7 @@ class MonteCarloLocalizer:
         self._last_odom: Pose2D | None = None
         self._updates = 0                        # sensor updates, for resample_interval
         self._estimate: Estimate | None = None
+        self._scratch = Scratch()
         self.set_map(grid)
 
     # --- the map ---------------------------------------------------------------------------
@@ -156,10 +158,10 @@ class MonteCarloLocalizer:
                 and abs(moved.theta) < self.config.update_min_a:
             return False
         sample_motion(self._particles, self._odom_ref, odometry_pose, self.config.alphas,
-                      self._rng)
+                      self._rng, self._scratch.noise(self._particles.shape[0]))
         self._odom_ref = odometry_pose
         self._sensor_update(scan, sensor_mount)
-        mean, cov, share = estimate(self._particles, self._weights, self._kld)
+        mean, cov, share = estimate(self._particles, self._weights, self._kld, self._scratch)
         pose = Pose2D.from_array(mean)
         self._estimate = Estimate(pose, cov, pose, odometry_pose, share)
         self._updates += 1
@@ -175,24 +177,19 @@ class MonteCarloLocalizer:
         log_p = likelihood_field(self._field, self._particles, sensor_mount, beams)
         with np.errstate(divide="ignore"):
             log_prior = np.log(self._weights)
-        # The measurement's likelihood under the prior, log sum(w_prior * p), feeds the recovery
-        # averages (Probabilistic Robotics' w_avg; it is mean(p) after a resampling).
-        log_avg = log_sum_exp(log_prior + log_p)
+        log_avg, self._weights = _weigh(log_prior, log_p, c.min_ess_fraction)
         if c.laser_model_type == "likelihood_field_prob":
             # Per beam (the geometric mean of pz): a product over 60 beams moves by several
             # nats when a few beams meet a moved pallet, which would read as "lost" and scatter
             # most particles; per beam, only a scan that disagrees as a whole does.
             log_avg /= beams.count * c.importance_factor
         self._recovery.observe(log_avg)
-        beta = temper(log_prior, log_p, c.min_ess_fraction)
-        log_w = log_prior + beta * log_p
-        self._weights = normalise(np.exp(log_w - np.max(log_w)))
 
     def _resample(self) -> None:
         inject = self._recovery.injection_probability()
         self._particles = np.ascontiguousarray(kld_resample(
             self._particles, self._weights, self._kld, self._rng, self.config.resampler,
-            inject, self.random_free_poses))
+            inject, self.random_free_poses, self._scratch))
         self._weights = np.full(self._particles.shape[0], 1.0 / self._particles.shape[0])
 
     # --- results ---------------------------------------------------------------------------
@@ -217,3 +214,27 @@ class MonteCarloLocalizer:
     def particle_count(self) -> int:
         return int(self._particles.shape[0])
 
+
+def _weigh(log_prior: np.ndarray, log_p: np.ndarray, min_fraction: float):
+    """(log of the measurement's likelihood under the prior, the new normalised weights).
+
+    The likelihood, log sum(w_prior * p), feeds the recovery averages (Probabilistic Robotics'
+    w_avg; it is mean(p) after a resampling). The weights are prior * p, tempered (``temper``)
+    if p alone would leave under ``min_fraction`` of the particles effective. Untempered, the
+    sum, the effective fraction and the weights all start from the same exp(log w - max), so it
+    is taken once: the very numbers ``log_sum_exp``, ``temper`` and a fresh exp would give."""
+    joint = log_prior + log_p
+    top = float(np.max(joint))
+    if not math.isfinite(top):
+        beta = temper(log_prior, log_p, min_fraction)
+        log_w = log_prior + beta * log_p
+        return log_sum_exp(joint), normalise(np.exp(log_w - np.max(log_w)))
+    e = np.exp(joint - top)                  # finite, in [0, 1], its largest 1
+    total = e.sum()
+    log_avg = top + math.log(float(total))
+    if min_fraction <= 0 or float(total ** 2 / (e.size * (e @ e))) >= min_fraction:
+        # beta = 1: prior + 1 * p is joint to the bit; e needs none of normalise's checks
+        return log_avg, e / total
+    beta = temper(log_prior, log_p, min_fraction)
+    log_w = log_prior + beta * log_p
+    return log_avg, normalise(np.exp(log_w - np.max(log_w)))

@@ -37,9 +37,13 @@ def motion_sigmas(delta, alphas) -> np.ndarray:
 
 
 def sample_motion(poses: np.ndarray, previous: Pose2D, current: Pose2D, alphas,
-                  rng: np.random.Generator) -> None:
+                  rng: np.random.Generator, noise: np.ndarray | None = None) -> None:
     """sample_motion_model_odometry: move ``poses`` (N, 3, float64) in place by the odometry
-    step ``previous`` -> ``current``, each with its own noise drawn from ``rng``."""
+    step ``previous`` -> ``current``, each with its own noise drawn from ``rng`` (into
+    ``noise``, an (N, 3) float64 buffer, when given: the very numbers a fresh array would get)."""
     delta = odometry_delta(previous, current)
-    noise = rng.standard_normal((poses.shape[0], 3))
+    if noise is None:
+        noise = rng.standard_normal((poses.shape[0], 3))
+    else:
+        rng.standard_normal(out=noise)
     _kernels().sample_motion_odometry(poses, np.array(delta), motion_sigmas(delta, alphas), noise)

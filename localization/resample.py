@@ -46,7 +46,14 @@ def normalise(weights) -> np.ndarray:
 def cumulative(weights: np.ndarray) -> np.ndarray:
     """Cumulative sum of normalised weights with the last entry exactly 1, so that no position
     in [0, 1) can fall past the end through round-off."""
-    c = np.cumsum(normalise(weights))
+    return _cumulative(normalise(weights))
+
+
+def _cumulative(w: np.ndarray) -> np.ndarray:
+    """``cumulative`` of weights that ``normalise`` has already checked: normalised again, as
+    the result has always been (their sum is 1 only to round-off)."""
+    total = w.sum()
+    c = np.cumsum(np.full(w.size, 1.0 / w.size) if total <= 0 else w / total)
     c[-1] = 1.0
     return c
 
@@ -68,9 +75,13 @@ def resample_indices(weights, count: int, rng: np.random.Generator,
             return fixed
         c = cumulative(count * w - copies)
         return np.concatenate((fixed, np.searchsorted(c, rng.random(rest), side="right")))
-    c = cumulative(w)
+    c = _cumulative(w)
     if scheme == "systematic":
-        positions = (rng.random() + np.arange(count)) / count
+        u = rng.random()
+        out = np.empty(count, np.int64)
+        if _kernels().systematic_take(c, u, count, out):
+            return out
+        positions = (u + np.arange(count)) / count
     elif scheme == "stratified":
         positions = (rng.random(count) + np.arange(count)) / count
     else:
@@ -90,6 +101,35 @@ def filterpy_indices(weights, rng: np.random.Generator, scheme: str = "systemati
         return np.asarray(fn(normalise(weights)), dtype=np.int64)
     finally:
         np.random.set_state(saved)
+
+
+class Scratch:
+    """Buffers one filter reuses from update to update: the open-addressing set of the KLD and
+    cluster kernels (all -1 between calls: the kernels empty the slots they fill, so no update
+    fills a whole fresh set) and the motion model's noise."""
+
+    def __init__(self):
+        self._table = np.empty(0, np.int64)
+        self._noise = np.empty((0, 3))
+
+    def table(self, n: int) -> np.ndarray:
+        """A set with room for ``n`` keys at most half full."""
+        size = 1 << max(4, (2 * n - 1).bit_length())
+        if self._table.size < size:
+            self._table = np.full(size, -1, np.int64)
+        return self._table
+
+    def noise(self, n: int) -> np.ndarray:
+        """An (n, 3) float64 buffer for the motion model's standard normals."""
+        if self._noise.shape[0] != n:
+            self._noise = np.empty((n, 3))
+        return self._noise
+
+
+def hash_table(n: int, scratch: Scratch | None) -> np.ndarray:
+    """An empty set (all -1) with room for ``n`` keys: the scratch's, else a fresh one."""
+    return np.full(1 << max(4, (2 * n - 1).bit_length()), -1, np.int64) if scratch is None \
+        else scratch.table(n)
 
 
 @dataclass
@@ -114,32 +154,37 @@ def histogram_keys(poses: np.ndarray, kld: KldParameters) -> np.ndarray:
 
 def kld_resample(poses: np.ndarray, weights: np.ndarray, kld: KldParameters,
                  rng: np.random.Generator, scheme: str = "systematic",
-                 inject: float = 0.0, random_poses=None) -> np.ndarray:
+                 inject: float = 0.0, random_poses=None, scratch: Scratch | None = None
+                 ) -> np.ndarray:
     """KLD-sampling (Fox 2003) as AMCL: draw samples until their count exceeds the bound for the
     number of histogram bins they occupy. Returns the new poses (M, 3).
 
     AMCL draws one sample at a time (multinomial) because a low-variance sampler needs the count
     in advance. Here ``max_particles`` candidates are drawn by ``scheme`` and put in random order,
     so every prefix is an unbiased sample that keeps the scheme's low variance, and the kernel
-    finds where the bound stops the prefix. With ``inject`` > 0 each candidate is, with that
-    probability, replaced by ``random_poses(n)`` (Augmented MCL); those count in the histogram
-    like any other sample, as in AMCL.
+    finds where the bound stops the prefix, copying only the samples it keeps. With ``inject``
+    > 0 each candidate is, with that probability, replaced by ``random_poses(n)`` (Augmented
+    MCL); those count in the histogram like any other sample, as in AMCL. ``scratch`` lends
+    the kernel its hash set (a fresh one without).
     """
     n = kld.max_particles
     idx = resample_indices(weights, n, rng, scheme)
-    idx = idx[rng.permutation(n)]
-    candidates = poses[idx]
+    order = idx[rng.permutation(n)]
+    source = poses
     if inject > 0:
         if random_poses is None:
             raise LocalizationError("injection needs a random pose generator")
         fresh = rng.random(n) < inject
         if fresh.any():
-            candidates[fresh] = random_poses(int(fresh.sum()))
-    keys = histogram_keys(candidates, kld)
-    table = np.full(1 << max(4, (2 * n - 1).bit_length()), -1, np.int64)
-    m = _kernels().kld_sample_count(keys, kld.pf_err, kld.pf_z, kld.min_particles,
-                                    kld.max_particles, table)
-    return candidates[:m]
+            source = poses[order]
+            source[fresh] = random_poses(int(fresh.sum()))
+            order = np.arange(n)
+    out = np.empty((n, 3), poses.dtype)
+    # plain float and int arguments: one compiled specialisation whatever the config holds
+    m = _kernels().kld_take(source, order, kld.bin_size, kld.n_theta, float(kld.pf_err),
+                            float(kld.pf_z), int(kld.min_particles), int(n),
+                            hash_table(n, scratch), out)
+    return out[:m]
 
 
 def log_sum_exp(log_w: np.ndarray) -> float:

@@ -22,6 +22,7 @@ scan's range_max.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -56,14 +57,23 @@ def select_beams(scan: Scan, max_beams: int, min_range: float = -1.0,
     laser_min_range / laser_max_range)."""
     range_min = max(scan.range_min, min_range) if min_range > 0 else scan.range_min
     range_max = min(scan.range_max, max_range) if max_range > 0 else scan.range_max
-    n = scan.beams
-    idx = np.unique(np.round(np.linspace(0, n - 1, min(max_beams, n))).astype(np.int64))
+    idx = _spread(scan.beams, max_beams)
     r = scan.ranges[idx].astype(np.float64)
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(r) & (r > range_min) & (r < range_max)
-    a = scan.angles()[idx][ok]
+    # scan.angles() at the chosen beams only: the same product and sum per beam
+    a = (scan.angle_min + scan.angle_increment * idx.astype(np.float64))[ok]
     points = np.column_stack((r[ok] * np.cos(a), r[ok] * np.sin(a)))
     return Beams(np.ascontiguousarray(points), float(range_max))
+
+
+@lru_cache(maxsize=32)
+def _spread(n: int, max_beams: int) -> np.ndarray:
+    """``max_beams`` indices evenly spread over ``n`` beams; a scan's size and the beam count
+    rarely change, so the choice is made once for each pair."""
+    idx = np.unique(np.round(np.linspace(0, n - 1, min(max_beams, n))).astype(np.int64))
+    idx.flags.writeable = False
+    return idx
 
 
 @dataclass

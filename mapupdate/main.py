@@ -50,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep(sub)
     _add_inject(sub)
     _add_score(sub)
+    _add_store(sub)
     return p
 
 
@@ -96,10 +97,13 @@ def _add_compare(sub) -> None:
 
 def _add_update(sub) -> None:
     upd = sub.add_parser("update", help="update a map from a recorded ROS bag or CARMEN log")
-    upd.add_argument("--map", type=Path, required=True, help="map_server YAML of the map")
-    upd.add_argument("--log", type=Path, required=True,
-                     help="ROS 1 bag, ROS 2 bag folder or CARMEN log")
-    upd.add_argument("--out", type=Path, required=True, help="YAML path of the updated map")
+    upd.add_argument("--map", type=Path, default=None,
+                     help="map_server YAML of the map (with --store: default the store's latest "
+                          "approved map)")
+    upd.add_argument("--log", type=Path, default=None,
+                     help="ROS 1 bag, ROS 2 bag folder or CARMEN log (required)")
+    upd.add_argument("--out", type=Path, default=None,
+                     help="YAML path of the updated map (optional with --store)")
     upd.add_argument("--state", type=Path, default=None,
                      help="updater state file: loaded if present, saved at the end (method "
                           "paper only)")
@@ -126,6 +130,11 @@ def _add_update(sub) -> None:
                      help="smooth a recorded localisation (map -> odom, corrected poses) that "
                           "jitters from scan to scan with the odometry over this window "
                           f"(default {SMOOTH_WINDOW:g}; 0: the poses as recorded)")
+    upd.add_argument("--store", default=None, metavar="maps.db|postgresql://...",
+                     help="commit the updated map as a version of this map store (made if "
+                          "absent), starting from its latest approved map (docs/map_store.md)")
+    upd.add_argument("--robot", default=None, metavar="NAME",
+                     help="the robot's name recorded with the version (default: the host name)")
     upd.set_defaults(command_at=("robot_commands", "update"))
 
 
@@ -192,6 +201,46 @@ def _add_score(sub) -> None:
     sc.add_argument("--json", type=Path, default=None, metavar="FILE",
                     help="also write the scores as JSON")
     sc.set_defaults(command_at=("robot_commands", "score"))
+
+
+STORE_HELP = "the map store: an SQLite file (maps.db) or a postgresql:// URL"
+
+
+def _add_store(sub) -> None:
+    st = sub.add_parser("store", help="versions of a map: log, show, diff, export, rollback, "
+                                      "tags, review (docs/map_store.md)")
+    acts = st.add_subparsers(dest="action", required=True)
+
+    def action(name, text, *positional):
+        a = acts.add_parser(name, help=text)
+        for arg, arg_help in positional:
+            a.add_argument(arg, help=arg_help)
+        a.add_argument("--store", required=True, metavar="maps.db|postgresql://...",
+                       help=STORE_HELP)
+        a.set_defaults(command_at=("robot_commands", "store"))
+        return a
+    version = ("version", "a version: N, vN, a tag, latest (approved) or head")
+    init = action("init", "make a map store (or set the review rule of one)")
+    init.add_argument("--require-approval", action=argparse.BooleanOptionalAction,
+                      default=None, help="new versions wait for 'approve' before robots get them")
+    action("log", "list the versions")
+    action("show", "what made a version", version)
+    diff = action("diff", "the cells changed from A to B", ("a", "version A"), ("b", "version B"))
+    diff.add_argument("--png", type=Path, default=None, metavar="OUT.png",
+                      help="also draw B with the cells freed (green) and drawn (magenta)")
+    export = action("export", "write a version as a map_server map", version)
+    export.add_argument("--out", type=Path, required=True, metavar="MAP.yaml")
+    action("rollback", "a new approved version equal to an approved one", version)
+    tag = acts.add_parser("tag", help="name a version, or list the names")
+    tag.add_argument("version", nargs="?", default=None, help=version[1])
+    tag.add_argument("name", nargs="?", default=None, help="the tag")
+    tag.add_argument("--store", required=True, metavar="maps.db|postgresql://...",
+                     help=STORE_HELP)
+    tag.set_defaults(command_at=("robot_commands", "store"))
+    for name, text in (("approve", "serve a pending version to robots"),
+                       ("reject", "refuse a pending version")):
+        review = action(name, text, version)
+        review.add_argument("--note", default=None, help="why, kept with the version")
 
 
 def _add_ros1(sub) -> None:
@@ -266,6 +315,19 @@ def _add_sweep(sub) -> None:
     sw.set_defaults(command_at=("study_commands", "sweep"))
 
 
+def _check_update_required(parser, args) -> None:
+    """``update`` needs --map and --out unless the map comes from and goes to a store
+    (--store), and --log always: said as argparse says a missing required option."""
+    missing = [name for name, value, needed in (("--map", args.map, args.store is None),
+                                                ("--log", args.log, True),
+                                                ("--out", args.out, args.store is None))
+               if needed and value is None]
+    if missing:
+        prog = f"{parser.prog} update"
+        parser.exit(2, f"{prog}: error: the following arguments are required: "
+                       f"{', '.join(missing)} (see {prog} --help)\n")
+
+
 def _user_errors() -> tuple[type[BaseException], ...]:
     """The errors a user's input or machine can cause: reported in one line, never a
     traceback. Every package's own error derives from ``MapUpdatingError``."""
@@ -279,7 +341,10 @@ def main(argv: list[str] | None = None) -> int:
     # ROS 2's arguments (after --ros-args) and ROS 1's remappings and private parameters
     # (``__name:=x``, ``_rate:=5``) are ROS's, not ours
     ours = full[1:full.index("--ros-args")] if "--ros-args" in full else full[1:]
-    args = build_parser().parse_args([a for a in ours if ":=" not in a])
+    parser = build_parser()
+    args = parser.parse_args([a for a in ours if ":=" not in a])
+    if args.command == "update":
+        _check_update_required(parser, args)
     args.ros_argv = full
     try:
         # the command's module is loaded only now: a robot's command never loads the testbed

@@ -5,7 +5,8 @@ import ast
 import pathlib
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "scenarios")
+PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "scenarios",
+            "robot", "studies", "mapupdate", "mapstore")
 MAX_LINES = 60
 
 

@@ -11,11 +11,12 @@ import pytest
 FORBIDDEN = ("sim", "scenarios", "studies", "pymunk", "rerun", "gymnasium", "matplotlib")
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "robot",
-            "scenarios", "studies", "mapupdate")
+            "scenarios", "studies", "mapupdate", "mapstore")
 
 
 @pytest.mark.parametrize("package", ["gridmap", "updater", "localization", "evaluation",
                                      "robotlogs", "robot", "robot.replay", "robot.logmap",
+                                     "mapstore",
                                      "robot.methods", "robot.ros1.node", "robot.ros_common.settings"])
 def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     code = (
@@ -31,13 +32,14 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
 @pytest.mark.parametrize("package, allowed", [
     ("gridmap", set()), ("updater", {"gridmap"}), ("localization", {"gridmap"}),
     ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"}),
-    ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation"}),
+    ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation", "mapstore"}),
+    ("mapstore", {"gridmap"}),
     # (scenarios/__main__.py: ``python -m scenarios`` is the command line)
     ("scenarios", {"gridmap", "sim", "updater", "localization", "evaluation", "robotlogs",
                    "robot", "mapupdate"}),
     ("studies", {"gridmap", "sim", "robot", "scenarios"}),
     ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "robot", "scenarios",
-                   "studies", "sim"})])
+                   "studies", "sim", "mapstore"})])
 def test_each_core_package_imports_only_what_design_md_allows(package, allowed):
     # every import statement, those inside functions too (imported on use)
     graph = import_graph()
@@ -125,7 +127,8 @@ def test_command_line_starts_without_compiling_kernels():
     ("gymnasium", ["scenarios/gym/__init__.py", "scenarios/gym/env.py"]),
     ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["robot/ros1/node.py"]),
     ("rclpy", ["robot/ros2/node.py", "robot/ros2/play.py", "robot/ros2/trigger.py"]),
-    ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"])])
+    ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"]),
+    ("psycopg", ["mapstore/backends.py"])])
 def test_each_optional_package_is_imported_in_one_place_only(front_end, modules):
     pattern = re.compile(rf"^\s*(import|from)\s+{front_end}\b", re.M)
     users = sorted(str(p.relative_to(ROOT)) for pkg in PACKAGES

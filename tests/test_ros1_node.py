@@ -231,6 +231,31 @@ print("sent")
 """
 
 
+def test_with_a_store_the_node_commits_versions_and_serves_the_latest_approved(ros, bags,
+                                                                              tmp_path):
+    from mapstore import open_store
+
+    db, save = tmp_path / "maps.db", tmp_path / "stored.yaml"
+    node = ros.node("__name:=stored", "--map", str(bags / "run/maps/M_W1.yaml"),
+                    f"_store:={db}", "_robot_name:=amr-1", "_store_poll_period:=0.3",
+                    "_publish_period:=0.2", f"_save_path:={save}", name="stored")
+    with open_store(db) as store:               # the empty store took the map as v1
+        assert store.latest() == 1
+    assert "committed v2, the reference now" in ros.call("/stored/commit")   # no review: approved
+    with open_store(db) as store:
+        assert store.version(2).meta["robot"] == "amr-1" and store.latest() == 2
+        data = store.get(2).data.copy()
+        data[100:110, 100:110] = 100
+        store.commit(store.get(2).with_data(data), 2, {"robot": "amr-2"})     # approved
+
+    def serves_v3():
+        return "success: True" in ros.call("/stored/save") and np.array_equal(
+            load_map(save).data, data)
+
+    ros.wait(serves_v3, 30, "the node serving another robot's approved v3")
+    ros.stop(node)
+
+
 def test_malformed_traffic_is_counted_and_skipped_never_a_crash(ros, tmp_path):
     node = ros.node("__name:=tolerant", "_publish_period:=0.3", name="tolerant")
     assert "sent" in ros.run_script(MALFORMED)

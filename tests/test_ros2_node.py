@@ -492,3 +492,38 @@ def test_with_amcl_pose_and_odometry_the_same_map(graph, recording):
     got = _replay_and_save(graph, recording, "amcl_probe", "amcl_pose", "-p", AMCL, "-p", MOUNT)
     assert np.array_equal(got["saved"], load_map(recording / "update.yaml").data)
     assert graph.stop(got["node"]) == 0
+
+
+def test_with_a_store_the_node_commits_versions_and_serves_the_latest_approved(graph,
+                                                                              recording):
+    from mapstore import open_store
+
+    db, save = graph.folder / "maps.db", graph.folder / "store_probe.yaml"
+    with open_store(db, create=True) as store:
+        store.set_require_approval(True)
+    name = "store_probe"
+    node = graph.node("--map", recording / "run/maps/M_W1.yaml", "--autostart", "--ros-args",
+                      "-r", f"__node:={name}", "-p", f"store:={db}", "-p", "robot_name:=amr-9",
+                      "-p", "store_poll_period:=0.3", "-p", "publish_period:=0.2", "-p",
+                      f"save_path:={save}", name=name)
+    graph.wait_for_service(f"/{name}/get_state", timeout=180)
+    with open_store(db) as store:                       # the empty store took the map as v1
+        assert store.latest() == 1 and store.version(1).status == "approved"
+    answer = graph.call(f"/{name}/commit")
+    assert answer["success"] and "committed v2, pending review" in answer["message"]
+    with open_store(db) as store:                       # another robot's version, approved
+        assert store.version(2).status == "pending"
+        assert store.version(2).meta["robot"] == "amr-9"
+        first = store.get(1)
+        data = first.data.copy()
+        data[100:110, 100:110] = 100
+        v3 = store.commit(first.with_data(data), 1, {"robot": "amr-2"})
+        store.approve(v3)
+
+    def serves_v3():
+        return graph.call(f"/{name}/save")["success"] and np.array_equal(
+            load_map(save).data, data)
+
+    ros2_tools.wait_until(serves_v3, 60, "the node serving the approved v3")
+    assert node.poll() is None and graph.stop(node) == 0
+    assert "Traceback" not in graph.log(name)

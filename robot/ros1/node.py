@@ -39,6 +39,7 @@ from ..ros_common.health import Health, pipeline_values
 from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import NodeSettings, node_settings, refuse_saving_over_the_map
+from ..ros_common.store_link import StoreLink
 
 ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
                 "python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs "
@@ -67,8 +68,9 @@ class MapUpdaterNode:
     """The node: call ``start()`` after ``rospy.init_node``, then ``rospy.spin()``."""
 
     def __init__(self, settings: NodeSettings, updater_config, pose_check_config,
-                 reference: OccupancyGrid | None = None):
+                 reference: OccupancyGrid | None = None, store: StoreLink | None = None):
         self.ros = _ros()
+        self.store = store
         self.settings, self.updater_config = settings, updater_config
         self.pose_check_config = pose_check_config
         self.health = Health()
@@ -112,6 +114,12 @@ class MapUpdaterNode:
                     return
                 if np.array_equal(ref.data, grid.data):
                     return                       # the same map again (a latched re-send)
+            if self.store is not None and self.store.version is None:
+                try:                             # an empty store: this map is its first version
+                    grid = self.store.start(grid)
+                except MapUpdatingError as e:
+                    self._skip("map store unusable", e)
+                    return
             self._adopt(grid)
             self.health.counts["maps_received"] += 1
 
@@ -164,7 +172,7 @@ class MapUpdaterNode:
         try:
             map_odom = self._lookup(s.map_frame, s.odom_frame, stamp)
             odom = self._lookup(s.odom_frame, s.base_frame, stamp)
-            mount = self._mount(laser_frame)
+            mount = self._mount(laser_frame, stamp)
         except tf2.ExtrapolationException as e:
             past = "past" in str(e)
             return self._skip("scan older than the tf buffer" if past
@@ -190,11 +198,12 @@ class MapUpdaterNode:
                                           self.ros["rospy"].Duration(self.settings.tf_timeout))
         return transform_pose(ts.transform)
 
-    def _mount(self, laser_frame: str) -> Pose2D:
+    def _mount(self, laser_frame: str, stamp) -> Pose2D:
         if laser_frame == self.settings.base_frame:
             return Pose2D(0.0, 0.0, 0.0)
-        # the latest, at every scan: a corrected /tf_static counts from then on
-        return self._lookup(self.settings.base_frame, laser_frame, self.ros["rospy"].Time(0))
+        # at every scan's stamp: a corrected /tf_static counts from then on, and a mount that
+        # moves (on /tf) is taken where it was
+        return self._lookup(self.settings.base_frame, laser_frame, stamp)
 
     def _skip(self, why: str, detail) -> None:
         self.health.skipped[why] += 1
@@ -206,6 +215,7 @@ class MapUpdaterNode:
     # --- output -------------------------------------------------------------------------------
     def _publish(self, _event=None) -> None:
         with self._lock:
+            self._take_newer_version()
             if self.pipeline is None:
                 self._diagnostics({})
                 return
@@ -276,9 +286,45 @@ class MapUpdaterNode:
         with self._lock:
             if self.pipeline is None:
                 return self.ros["TriggerResponse"](False, "no reference map yet")
-            self._adopt(self.pipeline.updater.updated_map())
+            updated = self.pipeline.updater.updated_map()
+            if self.store is None:
+                self._adopt(updated)
+                said = "the updated map is the reference now"
+            else:
+                ok, said = self._commit_to_store(updated)
+                if not ok:
+                    return self.ros["TriggerResponse"](False, said)
         self._publish()
-        return self.ros["TriggerResponse"](True, "the updated map is the reference now")
+        return self.ros["TriggerResponse"](True, said)
+
+    def _commit_to_store(self, updated: OccupancyGrid) -> tuple[bool, str]:
+        """(done, what to answer); lock held."""
+        meta = {"method": self.settings.method, "scans": self.pipeline.counts.as_dict(),
+                "config": {"updater": self.updater_config.to_dict()}}
+        try:
+            number, status = self.store.commit(updated, meta)
+        except MapUpdatingError as e:
+            return False, f"cannot commit: {e}"
+        if status == "approved":
+            self._adopt(updated)
+            return True, f"committed v{number}, the reference now"
+        self._adopt(self.pipeline.updater.reference_map)
+        return True, (f"committed v{number}, pending review; the node keeps "
+                      f"v{self.store.version} until a newer one is approved")
+
+    def _take_newer_version(self) -> None:
+        """A newer approved version in the store becomes the reference (lock held)."""
+        if self.store is None or self.pipeline is None:
+            return
+        try:
+            newer = self.store.newer()
+        except MapUpdatingError as e:
+            self._skip("map store unusable", e)
+            return
+        if newer is not None:
+            self._adopt(newer[1])
+            self.health.counts["store_versions_taken"] += 1
+        self.health.counts["store_version"] = self.store.version or 0
 
     def _reset(self, _req):
         with self._lock:
@@ -343,7 +389,11 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
     rospy.init_node("map_updater", argv=argv)
     settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
     refuse_saving_over_the_map(settings.save_path, map_path)
-    node = MapUpdaterNode(settings, updater_config, pose_check_config, reference)
+    store = StoreLink(settings.store, settings.robot_name, settings.store_poll_period) \
+        if settings.store else None
+    if store is not None:
+        reference = store.start(reference)
+    node = MapUpdaterNode(settings, updater_config, pose_check_config, reference, store)
     node.start(subscribe_map=reference is None)
     source = f"map {map_path}" if map_path else f"waiting for {settings.map_topic}"
     rospy.loginfo(f"map_updater: ready ({source}; scans on {', '.join(settings.scan_topics)})")

@@ -45,6 +45,7 @@ from ..ros_common.poses import LivePoses, TfPoses
 from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
 from ..ros_common.settings import Ros2Settings, node_settings, refuse_saving_over_the_map
+from ..ros_common.store_link import StoreLink
 from .parameters import declare_all, overrides_as_dict
 
 WHEELS = ("ros-jazzy-rclpy ros-jazzy-rmw-fastrtps-cpp ros-jazzy-nav-msgs "
@@ -91,6 +92,7 @@ class MapUpdaterNode(LifecycleNode):
         self.pipeline: RobotPipeline | None = None
         self.settings: Ros2Settings | None = None
         self.failure = ""                       # why the last configure failed
+        self.store: StoreLink | None = None     # the map store, with the ``store`` parameter
         self._active = []                       # what activate made and deactivate destroys
         self._configured = []                   # what configure made and cleanup destroys
         self._reset_state()
@@ -126,6 +128,11 @@ class MapUpdaterNode(LifecycleNode):
                 raise MapUpdatingError(NO_TF2_MSGS)
             declare_all(self, self.settings, self.updater_config, self.pose_check_config)
             reference = load_map(self.map_path) if self.map_path is not None else None
+            s = self.settings
+            self.store = StoreLink(s.store, s.robot_name, s.store_poll_period) if s.store \
+                else None
+            if self.store is not None:
+                reference = self.store.start(reference)
         except (MapUpdatingError, OSError) as e:
             self.failure = " ".join(str(e).split())
             self.get_logger().error(f"configure: {self.failure}")
@@ -218,6 +225,11 @@ class MapUpdaterNode(LifecycleNode):
                                   f"{grid.shape} at {grid.resolution} m")
             if np.array_equal(ref.data, grid.data):
                 return
+        if self.store is not None and self.store.version is None:
+            try:                                # an empty store: this map is its first version
+                grid = self.store.start(grid)
+            except MapUpdatingError as e:
+                return self._skip("map store unusable", e)
         self._adopt(grid)
         self.health.counts["maps_received"] += 1
 
@@ -306,6 +318,7 @@ class MapUpdaterNode(LifecycleNode):
         if self._scans and time.perf_counter() - self._scans.first()[1] > self.settings.tf_timeout:
             self._drain(force=True)             # the odometry stopped: use what waits
         counts = {}
+        self._take_newer_version()
         if self.pipeline is not None:
             grid = self.pipeline.updater.updated_map()
             counts = pipeline_values(self.pipeline, self.settings.method)
@@ -369,8 +382,36 @@ class MapUpdaterNode(LifecycleNode):
         if self.pipeline is None:
             return _answer(response, False, "no reference map yet")
         self._drain(force=True)
-        self._adopt(self.pipeline.updater.updated_map())
-        return _answer(response, True, "the updated map is the reference now")
+        updated = self.pipeline.updater.updated_map()
+        if self.store is None:
+            self._adopt(updated)
+            return _answer(response, True, "the updated map is the reference now")
+        meta = {"method": self.settings.method, "scans": self.pipeline.counts.as_dict(),
+                "config": {"updater": self.updater_config.to_dict()}}
+        try:
+            number, status = self.store.commit(updated, meta)
+        except MapUpdatingError as e:
+            return _answer(response, False, f"cannot commit: {e}")
+        if status == "approved":
+            self._adopt(updated)
+            return _answer(response, True, f"committed v{number}, the reference now")
+        self._adopt(self.pipeline.updater.reference_map)
+        return _answer(response, True, f"committed v{number}, pending review; the node keeps "
+                                       f"v{self.store.version} until a newer one is approved")
+
+    def _take_newer_version(self) -> None:
+        """A newer approved version in the store (another robot's, or this one's reviewed)
+        becomes the reference, buffers afresh."""
+        if self.store is None or self.pipeline is None:
+            return
+        try:
+            newer = self.store.newer()
+        except MapUpdatingError as e:
+            return self._skip("map store unusable", e)
+        if newer is not None:
+            self._adopt(newer[1])
+            self.health.counts["store_versions_taken"] += 1
+        self.health.counts["store_version"] = self.store.version or 0
 
     def _reset(self, _request, response):
         if self.pipeline is None:

@@ -47,6 +47,9 @@ class NodeSettings:
     use_pose_check: bool = False         # as `mapupdate update --pose-check`
     smooth_poses: float = 2.0            # [s] as `mapupdate update --smooth-poses`; 0: off
     method: str = "paper"                # as `mapupdate update --method`: paper, fuse, hybrid
+    store: str = ""                      # a map store (SQLite file or postgresql:// URL); "": none
+    robot_name: str = ""                 # who commits to the store ("": the host's name)
+    store_poll_period: float = 10.0      # [s] how often the store is asked for a newer version
 
     def __post_init__(self):
         for name in ("map_frame", "odom_frame", "base_frame", "map_topic", "save_path"):
@@ -62,8 +65,12 @@ class NodeSettings:
                 raise NodeSettingsError(f"parameter '~{name}': {topic!r} is not a valid ROS "
                                         "topic name (letters, digits, _ and /, starting with a "
                                         "letter, / or ~)")
+        for name in ("store", "robot_name"):
+            if not isinstance(getattr(self, name), str):
+                raise NodeSettingsError(f"parameter '~{name}' must be a string, got "
+                                        f"{getattr(self, name)!r}")
         for name, low, high in (("publish_period", 0.01, 3600.0), ("tf_timeout", 0.0, 10.0),
-                                ("smooth_poses", 0.0, 60.0)):
+                                ("smooth_poses", 0.0, 60.0), ("store_poll_period", 0.1, 3600.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or \
                     not (math.isfinite(v) and low <= v <= high):

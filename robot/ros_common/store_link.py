@@ -1,0 +1,73 @@
+"""A live node's link to the map store (the ``store`` parameter: an SQLite file or a
+``postgresql://`` URL): the node serves the store's latest approved version as its reference,
+commits its updated map as a version on ``commit``, and takes up a newer approved version
+(another robot's, or its own once reviewed) when one appears. No ROS import."""
+
+from __future__ import annotations
+
+import socket
+import time
+from importlib import metadata
+
+from gridmap import OccupancyGrid
+from mapstore import StoreError, open_store
+
+
+def _project_version() -> str:
+    try:
+        return metadata.version("lidar-map-updating")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+class StoreLink:
+    def __init__(self, target: str, robot: str = "", poll_period: float = 10.0):
+        self.target, self.poll_period = target, poll_period
+        self.robot = robot or socket.gethostname()
+        self.version: int | None = None          # the version the node's reference is
+        self._checked = time.monotonic()
+        with open_store(target, create=True):     # a missing file becomes an empty store
+            pass
+
+    def start(self, given: OccupancyGrid | None) -> OccupancyGrid | None:
+        """The reference the node starts from: the latest approved version; in an empty store,
+        ``given`` (the map file or the first map message), committed as its first version."""
+        with open_store(self.target) as store:
+            latest = store.latest()
+            if latest is not None:
+                self.version = latest
+                return store.get(latest)
+            if given is None:
+                return None
+            self.version = store.commit(given, None, {
+                "method": "import", "robot": self.robot, "source": "live node",
+                "project_version": _project_version()}, status="approved")
+            return given
+
+    def commit(self, grid: OccupancyGrid, meta: dict) -> tuple[int, str]:
+        """Commit ``grid`` as a child of the node's version; (its number, its status)."""
+        with open_store(self.target) as store:
+            number = store.commit(grid, self.version, {
+                "robot": self.robot, "source": "live node", "started_from": self.version,
+                "project_version": _project_version(), **meta})
+            status = store.version(number).status
+        if status == "approved":
+            self.version = number
+        return number, status
+
+    def newer(self, force: bool = False) -> tuple[int, OccupancyGrid] | None:
+        """A newer approved version than the node's, looked for at most every
+        ``poll_period`` seconds (``force``: now)."""
+        now = time.monotonic()
+        if not force and now - self._checked < self.poll_period:
+            return None
+        self._checked = now
+        with open_store(self.target) as store:
+            latest = store.latest()
+            if latest is None or (self.version is not None and latest <= self.version):
+                return None
+            self.version = latest
+            return latest, store.get(latest)
+
+
+__all__ = ["StoreError", "StoreLink"]

@@ -85,6 +85,9 @@ def _add_run(sub) -> None:
                      help="record the run for the rerun viewer")
     run.add_argument("--rerun-spawn", action="store_true",
                      help="show the run live in a rerun viewer (when there is a display)")
+    run.add_argument("--store", default=None, metavar="maps.db|postgresql://...",
+                     help="commit each session's map as a version of this map store (made if "
+                          "absent; docs/map_store.md)")
     run.set_defaults(command_at=("testbed_commands", "run"))
 
 

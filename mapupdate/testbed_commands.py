@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import sim
+from mapstore import open_store
 from robot.methods import check_method
 from robot.outputs import OutputClash, check_outputs
 from robot.robot_config import load_robot_config
@@ -18,6 +19,7 @@ from scenarios.runner import RunOptions, run_scenario
 from scenarios.session_bags import SessionBagRecorder, check_bag_folder
 
 from .extras import require
+from .version import __version__
 
 
 def render(args) -> int:
@@ -46,6 +48,8 @@ def run(args) -> int:
     recorder = rerun_recorder(args) if args.rerun or args.rerun_spawn else None
     if recorder is not None:
         observers.append(recorder)
+    if args.store is not None:
+        observers.append(StoreRecorder(args.store, args.method, args.seed))
     given = {} if args.pose_check is None else {"pose_check": args.pose_check}
     opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
                       quick=args.quick, progress=not args.no_progress,
@@ -82,6 +86,43 @@ def _check_run_outputs(args) -> None:
         if args.resume is not None and (Path(args.resume) / "state").is_dir():
             inputs["--resume"] = [p for p in (Path(args.resume) / "state").iterdir()]
         check_outputs(inputs, {"--rerun": [args.rerun]})
+
+
+class StoreRecorder:
+    """A session observer that commits each session's updated map M_i to a map store, its
+    parent the version committed before it (the store's first version: the map the first
+    update session starts from). The simulated sessions go on from their own maps: review
+    decides what robots are served, not what the testbed's next session starts from."""
+
+    def __init__(self, target, method: str, seed):
+        self.target, self.method, self.seed = target, method, seed
+        with open_store(target, create=True):
+            pass                                 # refused (one line) before the run starts
+
+    def session_start(self, scenario, session, world, previous, *rest) -> None:
+        self.scenario = scenario.name
+        with open_store(self.target) as store:
+            if store.latest(approved_only=False) is None:
+                store.commit(previous, None, {"method": "import", "robot": "simulated",
+                                              "source": f"{scenario.name} before session "
+                                                        f"{session}",
+                                              "project_version": __version__},
+                             status="approved")
+
+    def scan(self, *args) -> None:
+        pass
+
+    def session_end(self, result) -> None:
+        metrics = {k: float(v) for k, v in (result.metrics or {}).items()
+                   if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        with open_store(self.target) as store:
+            parent = store.latest(approved_only=False)
+            number = store.commit(result.updated, parent, {
+                "robot": "simulated", "source": f"{self.scenario} {result.name}",
+                "session": result.name, "method": self.method, "seed": self.seed,
+                "metrics": metrics, "project_version": __version__})
+            print(f"committed {result.name} to {store.name} as v{number} "
+                  f"({store.version(number).status})")
 
 
 def rerun_recorder(args):

@@ -440,3 +440,21 @@ def test_a_postgresql_store_without_psycopg_says_what_to_install():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2
     assert "needs psycopg" in p.stderr and "lidar-map-updating[store]" in p.stderr
+
+
+def test_run_commits_each_session_as_a_version(tmp_path):
+    from gridmap import load_map
+    from mapstore import open_store
+    from mapupdate import main
+
+    db = tmp_path / "maps.db"
+    assert main(["run", "--quick", "--sessions", "3", "--out", str(tmp_path / "run"),
+                 "--store", str(db), "--no-progress"]) == 0
+    with open_store(db) as store:
+        versions = store.log()
+        assert [v.number for v in versions] == [1, 2, 3]
+        assert [v.parent for v in versions] == [None, 1, 2]
+        assert [v.meta.get("session") for v in versions[1:]] == ["W2", "W3"]
+        for number, name in ((1, "M_W1"), (2, "M_W2"), (3, "M_W3")):
+            assert np.array_equal(store.get(number).data,
+                                  load_map(tmp_path / f"run/maps/{name}.yaml").data)

@@ -85,44 +85,52 @@ def _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width):
 
 
 @njit(cache=True)
+def segment_start(gx0, gy0, gx1, gy1, height, width):
+    """Where ``traverse`` starts: (cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y,
+    t_max_x, t_max_y), the first cell, the unit steps left to take along x and along y to the
+    end cell, and the walk's state (Amanatides and Woo); n_x = -1 when the segment misses the
+    grid. Kernels that do their own work per cell start from here and step as ``traverse``
+    does, so they visit the very same cells."""
+    dx = gx1 - gx0
+    dy = gy1 - gy0
+    t0, t1 = clip_to_box(gx0, gy0, dx, dy, float(width), float(height))
+    if t0 > t1:
+        return 0, 0, -1, 0, 1, 1, np.inf, np.inf, np.inf, np.inf
+    cx, cy, ex, ey = _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, dx)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, dy)
+    return (cx, cy, abs(ex - cx), abs(ey - cy), step_x, step_y, t_delta_x, t_delta_y, t_max_x,
+            t_max_y)
+
+
+@njit(cache=True)
 def traverse(gx0, gy0, gx1, gy1, height, width, rows, cols):
     """Every cell the segment (gx0, gy0)-(gx1, gy1) passes through, in order from the start,
     clipped to the grid. Writes into ``rows``/``cols`` and returns the count (at most their
     length). The walk is 4-connected: where the segment crosses a cell corner exactly, the cell
     beside the corner in x comes first, so no cell is skipped."""
-    dx = gx1 - gx0
-    dy = gy1 - gy0
-    t0, t1 = clip_to_box(gx0, gy0, dx, dy, float(width), float(height))
-    if t0 > t1:
-        return 0
-    cx, cy, ex, ey = _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width)
-    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, dx)
-    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, dy)
-    # Exactly |ex - cx| + |ey - cy| unit steps lead to the end cell; counting them (rather than
-    # testing t against the end) keeps the walk from overshooting through rounding.
-    n_steps = abs(ex - cx) + abs(ey - cy)
+    cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
+        segment_start(gx0, gy0, gx1, gy1, height, width)
+    # Exactly n_x + n_y unit steps lead to the end cell; counting them (rather than testing t
+    # against the end) keeps the walk from overshooting through rounding.
     cap = rows.shape[0]
-    n = 0
-    if cap == 0:
+    if n_x < 0 or cap == 0:
         return 0
     rows[0] = cy
     cols[0] = cx
     n = 1
-    for _ in range(n_steps):
+    for _ in range(n_x + n_y):
         if n >= cap:
             break
-        if cx == ex:
-            go_x = False
-        elif cy == ey:
-            go_x = True
-        else:
-            go_x = t_max_x <= t_max_y
+        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
         if go_x:
             cx += step_x
             t_max_x += t_delta_x
+            n_x -= 1
         else:
             cy += step_y
             t_max_y += t_delta_y
+            n_y -= 1
         rows[n] = cy
         cols[n] = cx
         n += 1

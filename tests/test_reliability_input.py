@@ -266,7 +266,7 @@ def test_replay_with_every_pose_off_the_map_skips_and_keeps_the_map(tmp_path):
     assert (load_map(tmp_path / "out.yaml").data == ref.data).all()
 
 
-@pytest.mark.parametrize("increment", [1e-12, 1e-38, 1e-300])
+@pytest.mark.parametrize("increment", [1e-12, 1e-38, 1e-300, 5e-324])
 def test_a_tiny_angle_increment_is_processed_in_bounded_time(increment):
     import time
 

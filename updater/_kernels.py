@@ -9,10 +9,11 @@ are bit planes: one bit per cell, packed eight to a byte (``bits[idx >> 3] >> (i
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
-from gridmap._kernels import NO_HIT, find_root, first_hit, traverse
-from gridmap.cells import FREE, OCCUPIED
+from gridmap._kernels import NO_HIT, find_root, first_hit, segment_start, traverse
+from gridmap.cells import FREE, OCCUPIED, UNKNOWN
 
 from .verdicts import BeamVerdict
 
@@ -24,13 +25,13 @@ CHANGE = int(BeamVerdict.CHANGE)
 
 
 # --- bits and counts --------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bit_get(bits, idx):
     """The bit of cell ``idx``."""
     return (bits[idx >> 3] >> (idx & 7)) & 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def test_and_set(bits, idx):
     """Set the bit of cell ``idx``; False if it was already set."""
     b = idx >> 3
@@ -49,14 +50,21 @@ def clear_bits(bits, cells, n):
         bits[idx >> 3] = bits[idx >> 3] & ~(1 << (idx & 7))
 
 
+@intrinsic
+def _ctpop64(typingctx, x):
+    """The processor's population count of an int64 (LLVM's ctpop)."""
+    sig = types.int64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(args[0])
+
+    return sig, codegen
+
+
 @njit(cache=True)
 def popcount16(v):
     """The number of set bits of a uint16."""
-    x = np.int64(v)
-    x = x - ((x >> 1) & 0x5555)
-    x = (x & 0x3333) + ((x >> 2) & 0x3333)
-    x = (x + (x >> 4)) & 0x0F0F
-    return (x + (x >> 8)) & 0x1F
+    return _ctpop64(np.int64(v) & 0xFFFF)
 
 
 # --- 1. beam classifier -----------------------------------------------------------------------
@@ -205,7 +213,80 @@ def beam_verdicts(valid, keep, n_skip, wrap, out_verdict):
                     out_verdict[j] = SKIPPED
 
 
+# --- the classifier in two calls -------------------------------------------------------------
+# The range-dependent distances' parameters, in this order, as ``UpdaterConfig`` names them.
+DISTANCES = ("pairing_distance_near", "pairing_range_near", "pairing_distance_slope",
+             "pairing_distance_max", "radius_near", "radius_far", "radius_far_range",
+             "removed_skip_fraction", "removed_skip_min", "free_fraction")
+
+
+@njit(cache=True)
+def beam_distances(ranges, res, dist, out_pairing, out_tol, out_skip, out_reach,
+                   out_free_reach):
+    """The distances of ``UpdaterConfig.pairing_distance``, ``new_obstacle_radius`` and
+    ``removed_skip`` for every range [m] (NaN for NaN), the same operations in the same order,
+    so the same bits: D(r) and tol(r) in grid units, the skip in metres, the removed-obstacle
+    walk's reach ``1 - skip / r``, and ``free_fraction`` for every free walk's reach. ``dist``
+    holds the parameters in the order of ``DISTANCES``."""
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        out_pairing[i] = np.minimum(dist[0] + dist[2] * (r - dist[1]), dist[3]) / res
+        frac = np.minimum(r / dist[6], 1.0)
+        out_tol[i] = (dist[4] + (dist[5] - dist[4]) * frac) / res
+        skip = np.maximum(dist[7] * r, dist[8])
+        out_skip[i] = skip
+        out_reach[i] = 1.0 - skip / r
+        out_free_reach[i] = dist[9]
+
+
+@njit(cache=True)
+def prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, res, dist,
+                  out_r, out_valid, out_virtual, out_measured, out_hits, out_pairing, out_tol,
+                  out_skip, out_reach, out_free_reach):
+    """The classifier's per-beam inputs in one call: ``valid_ranges``, the directions of the
+    virtual beams (``step`` apart from ``angle_min``) and, when there are ``ratio`` > 1 per
+    measured beam, of the measured ones (``increment`` apart), ``beam_endpoints`` and
+    ``beam_distances``. Returns (valid beams, a bound on the cells any evaluator can flag)."""
+    valid_ranges(ranges, r_lo, r_hi, out_r, out_valid)
+    beam_directions(sensor[2], angle_min, step, out_virtual)
+    measured = out_virtual      # one virtual beam per step: the very same angles
+    if ratio != 1:
+        beam_directions(sensor[2], np.float64(angle_min), np.float64(increment), out_measured)
+        measured = out_measured
+    n_valid, walked, box = beam_endpoints(out_r, out_valid, sensor, measured, res, out_hits)
+    beam_distances(out_r, res, dist, out_pairing, out_tol, out_skip, out_reach, out_free_reach)
+    return n_valid, min(walked, box)
+
+
+@njit(cache=True)
+def classify_scan(ref, sensor, virtual, max_len, hits, valid, pairing, half_window, wrap,
+                  min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict):
+    """``cast_virtual``, ``classify``, ``run_filter`` and ``beam_verdicts`` in one call.
+    Returns (detected changes, changes kept by the run filter)."""
+    cast_virtual(ref, sensor, virtual, max_len, out_expected, out_found)
+    raw = classify(hits, valid, pairing, out_expected, out_found, half_window, wrap, out_change)
+    kept = run_filter(out_change, min_run, wrap, out_keep)
+    beam_verdicts(valid, out_keep, n_skip, wrap, out_verdict)
+    return raw, kept
+
+
+@njit(cache=True)
+def ends_in_unknown(ref, expected, directions, found, ratio, n, out):
+    """Per measured beam i < n (its virtual beam i * ratio): its expected ray stops at an
+    unknown cell of ``ref`` (or leaves the map, whose outside is unknown). The expected point
+    is where the ray enters that cell: a hair (1e-4 grid units) further along lies inside."""
+    height, width = ref.shape
+    for i in range(n):
+        j = i * ratio
+        col = int(np.floor(expected[j, 0] + 1e-4 * directions[j, 0]))
+        row = int(np.floor(expected[j, 1] + 1e-4 * directions[j, 1]))
+        on_map = 0 <= col < width and 0 <= row < height
+        out[i] = found[j] and (ref[row, col] == UNKNOWN if on_map else True)
+
+
 # --- walks along beams ------------------------------------------------------------------------
+# A walk's cells listed (``walk``), then flagged (``flag_free_listed``, ``flag_occupied_listed``):
+# the plain form of what ``walk_beams`` does in one pass, kept to check it against.
 @njit(cache=True)
 def walk(ref, sensor, hit, reach, drop_last, cells):
     """List in ``cells`` (row 0: rows, row 1: cols) the cells of ``ref`` that the segment from
@@ -257,6 +338,63 @@ def flag_occupied_listed(ref, cells, count, marks, out, n):
     return n
 
 
+# What a fused walk flags: the free cells, the occupied-or-unknown ones, or the open unknown.
+WALK_FREE = 0
+WALK_BLOCKED = 1
+WALK_OPEN_UNKNOWN = 2
+
+
+@njit(cache=True)
+def walk_beams(ref, enclosed, sensor, hits, reach, select, want, drop_last, cap, kind, marks,
+               out, n):
+    """``walk`` and the flagging of its cells in one pass, with no list of cells in between,
+    for every beam i with ``select[i] == want`` and ``reach[i]`` > 0: append to ``out`` (from
+    position n) the cells of its walk (at most ``cap`` of them, as ``walk`` lists at most that
+    many) that are of ``kind`` and not yet marked, in the walks' order, and mark them. Returns
+    the new count. The cells are those of ``traverse``: the same start, the same steps, the
+    same tie-breaking. The flag goes in without a branch (``out[n]`` is written for every
+    cell and kept only when the cell is taken, so ``out`` needs one slot to spare), and the
+    loop over the beams holds the loop over the cells: no call per beam takes an array, each
+    of which would cost reference counting."""
+    height, width = ref.shape
+    flat = ref.reshape(-1)
+    gx0, gy0 = sensor[0], sensor[1]
+    for i in range(hits.shape[0]):
+        if select[i] != want or not reach[i] > 0.0:
+            continue
+        tx = gx0 + reach[i] * (hits[i, 0] - gx0)
+        ty = gy0 + reach[i] * (hits[i, 1] - gy0)
+        cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
+            segment_start(gx0, gy0, tx, ty, height, width)
+        count = min(n_x + n_y + 1, cap) if n_x >= 0 else 0
+        if count > 0 and drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
+            count -= 1
+        idx = cy * width + cx
+        row_step = step_y * width
+        for _ in range(count):
+            v = flat[idx]
+            b = idx >> 3
+            bit = np.uint8(1 << (idx & 7))
+            if kind == WALK_FREE:
+                wanted = v == FREE
+            elif kind == WALK_BLOCKED:
+                wanted = v != FREE
+            else:       # open unknown: unknown, and not in an enclosed region
+                wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
+            old = marks[b]
+            take = wanted & ((old & bit) == 0)
+            marks[b] = old | (bit if take else np.uint8(0))
+            out[n] = idx
+            n += take
+            go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
+            idx += step_x if go_x else row_step
+            n_x -= 1 if go_x else 0
+            n_y -= 0 if go_x else 1
+            t_max_x = t_max_x + t_delta_x if go_x else t_max_x
+            t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+    return n
+
+
 # --- 2. changed-cells evaluator ---------------------------------------------------------------
 @njit(cache=True)
 def disc_is_free(ref, px, py, rad):
@@ -280,13 +418,9 @@ def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out)
     beam i, all but the last, where p_th lies ``reach[i]`` of the way to the hit (none when
     ``reach[i]`` <= 0: the skip reaches back to the sensor); each cell once (``marks``: cells
     marked already, as seen surfaces are, get no flag). Returns the count."""
-    n = 0
-    for i in range(hits.shape[0]):
-        if verdict[i] != CHANGE or not reach[i] > 0.0:
-            continue
-        count = walk(ref, sensor, hits[i], reach[i], True, cells)
-        n = flag_occupied_listed(ref, cells, count, marks, out, n)
-    return n
+    return walk_beams(ref, marks, sensor, hits, reach, select=verdict, want=CHANGE,
+                      drop_last=True, cap=cells.shape[1], kind=WALK_BLOCKED, marks=marks, out=out,
+                      n=0)
 
 
 @njit(cache=True)
@@ -375,13 +509,9 @@ def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
 def flag_free_unchanged(ref, sensor, hits, reach, verdict, marks, cells, out):
     """Free: the free cells of ``ref`` from the sensor to ``reach[i]`` of the way to the hit of
     each UNCHANGED beam i; each cell once (``marks``). Returns the count."""
-    n = 0
-    for i in range(hits.shape[0]):
-        if verdict[i] != UNCHANGED:
-            continue
-        count = walk(ref, sensor, hits[i], reach[i], False, cells)
-        n = flag_free_listed(ref, cells, count, marks, out, n)
-    return n
+    return walk_beams(ref, marks, sensor, hits, reach, select=verdict, want=UNCHANGED,
+                      drop_last=False, cap=cells.shape[1], kind=WALK_FREE, marks=marks, out=out,
+                      n=0)
 
 
 @njit(cache=True)
@@ -429,7 +559,7 @@ def flag_hit_surfaces(ref, hits, verdict, marks, out, n):
 
 
 # --- growth into the unknown (not in the paper) -----------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def is_open_unknown(ref_flat, enclosed, idx):
     """Unknown in M and outside the enclosed regions: space M never saw, where the map grows
     (an enclosed region is an object's interior, which the last check closes)."""
@@ -466,18 +596,35 @@ def flag_open_unknown_walks(ref, enclosed, sensor, hits, reach, into_unknown, ma
     sensor to ``reach[i]`` of the way to the hit of each beam i that looks into unknown space
     (``into_unknown[i]``), all but the last; each cell once (``marks``). Returns the new
     count."""
-    width = ref.shape[1]
-    flat = ref.reshape(-1)
+    return walk_beams(ref, enclosed, sensor, hits, reach, select=into_unknown, want=True,
+                      drop_last=True, cap=cells.shape[1], kind=WALK_OPEN_UNKNOWN, marks=marks,
+                      out=out, n=n)
+
+
+@njit(cache=True)
+def flag_unknown_seen_through(ref, enclosed, sensor, hits, ranges, expected, directions,
+                              found, short, marks, cap, into, reach, out, n):
+    """``flag_open_unknown_walks`` for the valid beams whose expected ray ends at an unknown
+    cell (``ends_in_unknown`` of their ``expected`` point, ``directions`` and ``found``, one
+    row per beam), each walking to ``short`` [m] short of its hit (beams no longer than that
+    walk nowhere); ``into`` and ``reach`` get which beams walk and how far. Returns the new
+    count."""
+    height, width = ref.shape
     for i in range(hits.shape[0]):
-        if not into_unknown[i] or not reach[i] > 0.0:
+        r = ranges[i]
+        into[i] = False
+        reach[i] = 0.0
+        if not (r > short) or not found[i]:
+            continue    # a NaN range (an invalid beam) is not above short either
+        col = int(np.floor(expected[i, 0] + 1e-4 * directions[i, 0]))
+        row = int(np.floor(expected[i, 1] + 1e-4 * directions[i, 1]))
+        if 0 <= col < width and 0 <= row < height and ref[row, col] != UNKNOWN:
             continue
-        count = walk(ref, sensor, hits[i], reach[i], True, cells)
-        for k in range(count):
-            idx = cells[0, k] * width + cells[1, k]
-            if is_open_unknown(flat, enclosed, idx) and test_and_set(marks, idx):
-                out[n] = idx
-                n += 1
-    return n
+        into[i] = True
+        reach[i] = 1.0 - short / r
+    return walk_beams(ref, enclosed, sensor, hits, reach, select=into, want=True,
+                      drop_last=True, cap=cap, kind=WALK_OPEN_UNKNOWN, marks=marks, out=out,
+                      n=n)
 
 
 @njit(cache=True)
@@ -548,6 +695,66 @@ def apply_drawn(drawn, out):
                 out[idx] = OCCUPIED
 
 
+# --- steps 2 and 3 in one call ----------------------------------------------------------------
+@njit(cache=True)
+def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_reach, tol, free_reach,
+              expected, directions, found, guard, unknown_guard, grow, short, gaps, margin,
+              confirm, cap, ch_marks, un_marks, hit_marks, protected, hits_unknown, into,
+              unknown_reach, changed, unchanged):
+    """The flags of a scan past the lost check, in the order of ``MapUpdater``'s steps
+    (``updater.steps``), each kernel as its step calls it: the seen-surface guard (radius
+    ``guard``, 0: none), the unknown cells hit (``grow``), the removed- and new-obstacle
+    flags, the walks into unknown space, the guard released, ``fill_gaps`` (clearance
+    ``gaps``, 0: off; the free walks then reach to ``margin`` short of the hit where that is
+    further), the unchanged flags, the hits that confirm M's surfaces (``confirm``), and the
+    unknown hits' marks released. One call instead of a dozen: each call from Python has a
+    fixed cost. Returns (changed flags, new-obstacle flags, fill_gaps flags, unchanged flags,
+    unknown cells hit)."""
+    n_guarded = 0
+    if guard > 0.0:
+        n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
+                                       ch_marks, protected)
+    n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
+                               hits_unknown) if grow else 0
+    n = walk_beams(ref, ch_marks, sensor, hits, removed_reach, select=verdict, want=CHANGE,
+                   drop_last=True, cap=cap, kind=WALK_BLOCKED, marks=ch_marks, out=changed, n=0)
+    n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n)
+    n_new = n_ch - n
+    if grow:
+        n_ch = flag_unknown_seen_through(ref, enclosed, sensor, hits, ranges, expected,
+                                         directions, found, short, ch_marks, cap, into,
+                                         unknown_reach, changed, n_ch)
+    clear_bits(ch_marks, protected, n_guarded)
+    n_gaps = 0
+    if gaps > 0:
+        n_gaps = flag_gaps(ref, hits, verdict, gaps, ch_marks, changed, n_ch) - n_ch
+        n_ch += n_gaps
+        for i in range(ranges.shape[0]):
+            if margin > 0.0 and margin < ranges[i]:
+                free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
+    n_un = walk_beams(ref, un_marks, sensor, hits, free_reach, select=verdict, want=UNCHANGED,
+                      drop_last=False, cap=cap, kind=WALK_FREE, marks=un_marks, out=unchanged,
+                      n=0)
+    n_un = flag_occupied_unchanged(ref, hits, verdict, un_marks, unchanged, n_un)
+    if confirm:
+        n_un = flag_hit_surfaces(ref, hits, verdict, un_marks, unchanged, n_un)
+    if grow:
+        clear_bits(ch_marks, hits_unknown, n_hits)
+        n_un = flag_listed_unchanged(hits_unknown[:n_hits], un_marks, unchanged, n_un)
+    return n_ch, n_new, n_gaps, n_un, n_hits
+
+
+@njit(cache=True)
+def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
+                    support, width, ch_marks, un_marks, moved):
+    """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
+    stamps), in one call. Returns the change of the number of changed cells."""
+    n_moved = push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks,
+                         un_marks, moved)
+    return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
+                  support, ch_marks)
+
+
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
@@ -593,7 +800,7 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def confirmed(hist, seen, ref, idx, mask):
     """An occupied cell of M whose recent flags are not all changed: a surface the scans still
     see. The unanimous rule frees no occupied cell next to one."""
@@ -641,24 +848,76 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
 
 
 @njit(cache=True)
-def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support):
+def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support, stamp=None):
     """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
-    crossed the threshold: no other cell's inputs changed. Returns the change of the number of
-    changed cells."""
+    crossed the threshold: no other cell's inputs changed. The rule reads only the buffers, so
+    each cell is decided once however many entries name it: ``stamp`` (bits per cell, all
+    clear, and cleared again before returning; a scratch plane when not given) tells which
+    are done. The rule is ``decide_cell``'s, written out in the loop: a call taking the
+    arrays, inlined or not, counts a reference to each of them per cell. Returns the change
+    of the number of changed cells."""
+    if stamp is None:
+        stamp = np.zeros((ref.shape[0] + 7) // 8, np.uint8)
     height = ref.shape[0] // width
+    window = popcount16(mask)
     delta = 0
     for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
-        delta += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
-        if moved[k] >= 0 or not (support or few > 0):
-            continue
-        row, col = idx // width, idx % width
-        for rr in range(max(row - 1, 0), min(row + 2, height)):
-            for cc in range(max(col - 1, 0), min(col + 2, width)):
-                if rr != row or cc != col:
-                    delta += decide_cell(hist, seen, ref, decided, rr * width + cc, width, mask,
-                                         threshold, few, support)
+        lo, hi = neighbourhood(idx, width, ref.shape[0], (support or few > 0) and moved[k] < 0)
+        for row_start in range(lo, hi + 1, width):
+            for i in range(row_start, row_start + (hi - lo) % width + 1):
+                if stamp[i >> 3] & (1 << (i & 7)):
+                    continue
+                stamp[i >> 3] |= np.uint8(1 << (i & 7))
+                n = popcount16(hist[i] & mask)
+                changed = n >= threshold
+                row, col = i // width, i % width
+                r0, r1 = max(row - 1, 0), min(row + 2, height)
+                c0, c1 = max(col - 1, 0), min(col + 2, width)
+                if not changed and few > 0:
+                    changed = n >= few and seen[i] < threshold and n == seen[i]
+                    if changed and ref[i] == OCCUPIED:   # no neighbour of a seen surface
+                        for rr in range(r0, r1):
+                            for j in range(rr * width + c0, rr * width + c1):
+                                if j != i and ref[j] == OCCUPIED and seen[j] and \
+                                        popcount16(hist[j] & mask) < min(int(seen[j]), window):
+                                    changed = False
+                if not changed and support:
+                    occ = ref[i] != FREE
+                    for rr in range(r0, r1):
+                        for j in range(rr * width + c0, rr * width + c1):
+                            if j != i and (ref[j] != FREE) == occ and \
+                                    popcount16(hist[j] & mask) >= threshold:
+                                n += 1
+                    changed = n >= threshold
+                if changed != (((decided[i >> 3] >> (i & 7)) & 1) == 1):
+                    decided[i >> 3] ^= np.uint8(1 << (i & 7))
+                    delta += 1 if changed else -1
+    clear_neighbourhoods(moved, width, ref.shape[0], support or few > 0, stamp)
     return delta
+
+
+@njit(cache=True)
+def clear_neighbourhoods(moved, width, size, spread, stamp):
+    """Clear the ``stamp`` bytes of the cells ``decide`` stamped for ``moved``."""
+    for k in range(moved.shape[0]):
+        idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
+        lo, hi = neighbourhood(idx, width, size, spread and moved[k] < 0)
+        for row_start in range(lo, hi + 1, width):
+            for j in (row_start, row_start + (hi - lo) % width):
+                stamp[j >> 3] = 0
+
+
+@njit(cache=True)
+def neighbourhood(idx, width, size, spread):
+    """(first, last) cell of the block of cell ``idx`` and, with ``spread``, its
+    8-neighbours on the map: its rows run from first to last in steps of ``width``."""
+    if not spread:
+        return idx, idx
+    row, col = idx // width, idx % width
+    c0, c1 = max(col - 1, 0), min(col + 1, width - 1)
+    r0, r1 = max(row - 1, 0), min(row + 1, size // width - 1)
+    return r0 * width + c0, r1 * width + c1
 
 
 @njit(cache=True)

@@ -194,29 +194,18 @@ class MapUpdater:
         """Steps 2-3 and the buffers for a scan past the lost check: (changed flags,
         new-obstacle flags, unchanged flags)."""
         cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
-        grow = cfg.grow_into_unknown
         # the seen-surface guard, fill_gaps, the growth into the unknown and the hits that
-        # confirm M's surfaces (flag_hit_surfaces) are not in the paper
-        guarded = steps.guard_seen_surfaces(ref, beams, cfg, res, self._ch_marks,
-                                            self._enclosed, ws)
-        n_hits = steps.list_unknown_hits(ref, beams, self._enclosed, self._hit_marks,
-                                         self._ch_marks, ws) if grow else 0
-        n_ch, n_new = steps.flag_changed_cells(ref, beams, self._ch_marks, ws)
-        if grow:
-            n_ch = steps.flag_unknown_seen_through(ref, beams, self._enclosed, cfg, res,
-                                                   self._ch_marks, ws, n_ch)
-        steps.release_seen_surfaces(self._ch_marks, guarded, ws)
-        n_ch, n_gaps = steps.fill_gaps(ref, beams, cfg, res, self._ch_marks, ws, n_ch)
-        n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
-        n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
-        if grow:
-            n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
+        # confirm M's surfaces (flag_hit_surfaces) are not in the paper; flag_scan runs the
+        # steps guard_seen_surfaces ... release_unknown_hits in one call
+        n_ch, n_new, n_un, n_hits = steps.flag_scan(
+            ref, beams, cfg, res, (self._ch_marks, self._un_marks, self._hit_marks),
+            self._enclosed, ws)
         self._push_and_decide(n_ch, n_un)
-        if grow:
+        if cfg.grow_into_unknown:
             self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
                                              n_hits, n_ch, cfg, self._hit_marks, self._drawn,
                                              ws)
-        return n_ch, n_new + n_gaps, n_un
+        return n_ch, n_new, n_un
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
         """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the
@@ -241,12 +230,10 @@ class MapUpdater:
 
     def _push_and_decide(self, n_changed: int, n_unchanged: int) -> None:
         """The scan's flags listed in the workspace into the buffers, then the decision."""
-        cfg, ref, ws = self.config, self._ref.reshape(-1), self._ws
-        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
-        n_moved = steps.push_flags(hist, seen, ref, n_changed, n_unchanged, cfg, self._ch_marks,
-                                   self._un_marks, ws)
-        self._n_changed += steps.decide(hist, seen, ref, self._decided, n_moved,
-                                        self._ref.shape[1], cfg, ws)
+        self._n_changed += steps.push_and_decide(
+            self._hist.reshape(-1), self._seen.reshape(-1), self._ref.reshape(-1),
+            self._decided, n_changed, n_unchanged, self._ref.shape[1], self.config,
+            self._ch_marks, self._un_marks, self._ws)
 
     def _placed_pose(self, sensor_pose: Pose2D, pose_check):
         """(pose, its grid coordinates, None, "") for a scan to process: the given sensor pose,

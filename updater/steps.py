@@ -1,16 +1,20 @@
 """The steps of docs/algorithm.md, one function each, in the order a scan goes through them:
 ``classify_beams`` -> ``is_lost`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` ->
-``push_flags`` -> ``decide``. The rules that are not in the paper are steps of their own:
-``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the changed-cells
-evaluator, ``fill_gaps`` after it, and ``flag_hit_surfaces`` after the unchanged-cells
-evaluator. ``close_outlines`` builds the output map on demand,
+``push_flags`` -> ``decide`` (``push_and_decide``: the two in one call). The rules that are not in the paper are
+steps of their own: ``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the
+changed-cells evaluator, ``fill_gaps`` after it, ``flag_hit_surfaces`` after the
+unchanged-cells evaluator, and the growth into the unknown (``list_unknown_hits``,
+``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``flag_scan`` runs
+the steps from the guard to ``release_unknown_hits`` in one kernel call, as ``MapUpdater``
+does for every scan it processes: each kernel call from Python has a fixed cost, which a
+scan of a few hundred beams feels. ``close_outlines`` builds the output map on demand,
 ``enclosed_unknown`` prepares the last check once per reference map.
 
-Each function computes the per-beam quantities it needs with NumPy, in grid units, from the
-configuration's own methods (``UpdaterConfig.pairing_distance`` and the like), and calls the
-kernels of ``updater._kernels`` once each for the whole scan. Points are in grid units,
-(gx, gy) = ((x - ox) / res, (y - oy) / res); cells are addressed by flat index
-``row * width + col``.
+Each function takes the per-beam quantities from the classifier (computed in its kernel,
+with the same operations as the configuration's own methods, ``UpdaterConfig.pairing_distance``
+and the like) and calls the kernels of ``updater._kernels`` once each for the whole scan.
+Points are in grid units, (gx, gy) = ((x - ox) / res, (y - oy) / res); cells are addressed by
+flat index ``row * width + col``.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gridmap import UNKNOWN, Scan
+from gridmap import Scan
 
 from .config import UpdaterConfig
 
@@ -58,6 +62,8 @@ class Beams:
     own_found: np.ndarray | None = None
     own_direction: np.ndarray | None = None
     change: np.ndarray | None = None
+    # the removed-obstacle walk's reach, 1 - skip / r; None: computed from the two
+    removed_reach: np.ndarray | None = None
 
 
 class Workspace:
@@ -81,10 +87,15 @@ class Workspace:
             self.change = np.zeros(n, np.bool_)
             self.keep = np.zeros(n, np.bool_)
             self.verdict = np.zeros(n, np.int8)
+            self.measured = np.zeros((n, 2), np.float64)
+            self.into = np.zeros(n, np.bool_)
+            for name in ("pairing", "tol", "skip", "reach", "free_reach", "unknown_reach"):
+                setattr(self, name, np.zeros(n, np.float64))
         if m != self._virtual:
             self._virtual = m
             self.expected = np.zeros((m, 2), np.float64)
             self.found = np.zeros(m, np.bool_)
+            self.virtual = np.zeros((m, 2), np.float64)
         if walk > self._walk:
             self._walk = walk
             self.cells = np.zeros((2, walk), np.int64)    # rows, cols of one walk
@@ -111,6 +122,14 @@ class Workspace:
             self._protected = int(capacity * 1.25) + 64
             self.protected = np.zeros(self._protected, np.int32)
 
+    def distances(self, cfg: UpdaterConfig) -> np.ndarray:
+        """The parameters of the range-dependent distances, for ``kernels().beam_distances``
+        (kept while the configuration is the same object)."""
+        if getattr(self, "_dist_cfg", None) is not cfg:
+            self._dist_cfg = cfg
+            self.dist = np.array([getattr(cfg, name) for name in kernels().DISTANCES], np.float64)
+        return self.dist
+
     def nbytes(self) -> int:
         return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
 
@@ -122,14 +141,6 @@ def to_grid(sensor_pose, origin, res) -> np.ndarray:
 
 
 # --- 1. beam classifier -----------------------------------------------------------------------
-def valid_ranges(scan: Scan, r_hi: float, ws: Workspace) -> np.ndarray:
-    """The ranges [m] as float64 in ``ws.r``, NaN for invalid beams, and ``ws.valid``. A beam is
-    invalid when its range is not finite, not above 0 (r = 0 is no hit), below the scan's
-    range_min, or at or beyond ``r_hi`` = min(max_range, the scan's range_max)."""
-    kernels().valid_ranges(scan.ranges, float(scan.range_min), float(r_hi), ws.r, ws.valid)
-    return ws.r
-
-
 def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
     """The range-dependent distances of docs/algorithm.md for every beam, from the config: D(r_i)
     and tol(r_i) [grid units], and the removed-obstacle skip [m]."""
@@ -137,57 +148,47 @@ def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
             cfg.removed_skip(ranges))
 
 
-def hit_points(scan: Scan, sensor: np.ndarray, res: float, ratio: int,
-               ws: Workspace) -> tuple[np.ndarray, int, int]:
-    """Hit points of the valid beams into ``ws.hits`` (``ws.r``, ``ws.valid`` ready), and the
-    directions of the virtual beams, ``ratio`` per measured angular step. Returns (virtual
-    directions (M, 2), valid beams, a bound on the cells any evaluator can flag)."""
-    k = kernels()
-    n = scan.beams
-    step = scan.angle_increment / ratio
-    virtual = np.empty((n * ratio, 2))
-    k.beam_directions(sensor[2], scan.angle_min, step, virtual)
-    measured = virtual      # one virtual beam per step: the very same angles
-    if ratio != 1:
-        measured = np.empty((n, 2))
-        k.beam_directions(sensor[2], float(scan.angle_min), float(scan.angle_increment),
-                          measured)
-    n_valid, walk, box = k.beam_endpoints(ws.r, ws.valid, sensor, measured, res, ws.hits)
-    return virtual, n_valid, min(walk, box)
-
-
 def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
                    cfg: UpdaterConfig, ws: Workspace) -> Beams:
     """Valid beams, hit points, the per-beam distances, virtual beams cast once each, the
     windowed comparison with D(r), the run filter and the N_skip neighbourhood of the changes.
     The window and the run filter wrap around the scan's ends only when the scan covers 360
-    degrees."""
+    degrees. Two kernel calls: the per-beam inputs (``prepare_beams``: valid beams, hit
+    points, the distances of ``beam_distances``), then the classifier (``classify_scan``). A
+    beam is invalid when its range is not finite, not above 0 (r = 0 is no hit), below the
+    scan's range_min, or at or beyond min(max_range, the scan's range_max)."""
     k = kernels()
     n = scan.beams
     ratio = cfg.virtual_to_measured_ratio
     r_hi = min(cfg.max_range, scan.range_max)
     max_len = (r_hi + cfg.cast_margin) / res
     ws.for_beams(n, n * ratio, 2 * int(math.ceil(max_len)) + 8)
-    ranges = valid_ranges(scan, r_hi, ws)
-    virtual, n_valid, bound = hit_points(scan, sensor, res, ratio, ws)
-    k.cast_virtual(ref, sensor, virtual, max_len, ws.expected, ws.found)
     step = scan.angle_increment / ratio
-    half = int(math.floor(math.radians(cfg.window_deg) / abs(step) + 1e-9)) if n else 0
+    n_valid, bound = k.prepare_beams(
+        ranges=scan.ranges, r_lo=float(scan.range_min), r_hi=float(r_hi), sensor=sensor,
+        angle_min=scan.angle_min, step=step, increment=scan.angle_increment, ratio=ratio,
+        res=res, dist=ws.distances(cfg), out_r=ws.r, out_valid=ws.valid,
+        out_virtual=ws.virtual, out_measured=ws.measured, out_hits=ws.hits,
+        out_pairing=ws.pairing, out_tol=ws.tol, out_skip=ws.skip, out_reach=ws.reach,
+        out_free_reach=ws.free_reach)
     # a window wider than the scan searches nothing more; a tiny angle_increment (1e-12 rad)
-    # would otherwise ask the kernel for 1e11 beams, holding the interpreter for hours
-    half = min(half, n * ratio)
+    # would otherwise ask the kernel for 1e11 beams, holding the interpreter for hours (and
+    # below 1e-308 the quotient is inf, which no integer holds)
+    span = math.radians(cfg.window_deg) / abs(step) if n else 0.0
+    half = n * ratio if span >= n * ratio else int(math.floor(span + 1e-9))
     wrap = scan.covers_full_circle()
-    pairing, tol, skip = beam_distances(ranges, res, cfg)
-    raw = k.classify(ws.hits, ws.valid, pairing=pairing, expected=ws.expected, found=ws.found,
-                     half_window=half, wrap=wrap, out_change=ws.change)
-    kept = k.run_filter(ws.change, cfg.min_run, wrap, ws.keep)
-    k.beam_verdicts(ws.valid, ws.keep, cfg.n_skip, wrap, ws.verdict)
+    raw, kept = k.classify_scan(
+        ref, sensor, virtual=ws.virtual, max_len=max_len, hits=ws.hits, valid=ws.valid,
+        pairing=ws.pairing, half_window=half, wrap=wrap, min_run=cfg.min_run,
+        n_skip=cfg.n_skip, out_expected=ws.expected, out_found=ws.found, out_change=ws.change,
+        out_keep=ws.keep, out_verdict=ws.verdict)
     # No evaluator can flag more cells than the bound or the map holds; the n more leave room
     # for an unchanged flag at each beam's hit cell.
     ws.for_flags(min(bound, ref.size) + n)
-    return Beams(sensor, ranges, ws.hits, pairing, tol, skip, np.full(n, cfg.free_fraction),
-                 ws.verdict, n_valid, raw, kept, ws.expected[::ratio][:n],
-                 ws.found[::ratio][:n], virtual[::ratio][:n], ws.change[:n])
+    own = slice(None, None, ratio) if ratio != 1 else slice(None)
+    return Beams(sensor, ws.r, ws.hits, ws.pairing, ws.tol, ws.skip, ws.free_reach,
+                 ws.verdict, n_valid, raw, kept, ws.expected[own][:n], ws.found[own][:n],
+                 ws.virtual[own][:n], ws.change, ws.reach)
 
 
 def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
@@ -195,13 +196,11 @@ def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarra
     """Per beam: its expected ray stops at an unknown cell of M (or leaves the map, whose
     outside is unknown). The expected point is where the ray enters that cell: a hair further
     along the ray lies inside it."""
-    inside = expected + 1e-4 * directions
-    col = np.floor(inside[:, 0]).astype(np.int64)
-    row = np.floor(inside[:, 1]).astype(np.int64)
-    on_map = (col >= 0) & (row >= 0) & (col < ref.shape[1]) & (row < ref.shape[0])
-    cell = np.full(len(col), UNKNOWN, np.int8)
-    cell[on_map] = ref[row[on_map], col[on_map]]
-    return found & (cell == UNKNOWN)
+    out = np.zeros(len(found), np.bool_)
+    kernels().ends_in_unknown(ref, np.ascontiguousarray(expected),
+                              np.ascontiguousarray(directions), np.ascontiguousarray(found),
+                              ratio=1, n=len(found), out=out)
+    return out
 
 
 def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
@@ -264,8 +263,7 @@ def flag_changed_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
     by the skip, all but the last (cells marked already, as ``guard_seen_surfaces`` marks
     them, get none). Returns (cells flagged, new-obstacle flags)."""
     k = kernels()
-    reach = 1.0 - beams.skip / beams.ranges     # p_th as a fraction of the way to the hit
-    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach=reach,
+    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach=removed_reach(beams),
                                  verdict=beams.verdict, marks=marks, cells=ws.cells,
                                  out=ws.changed)
     n_all = k.flag_new_obstacles(ref, beams.hits, tol=beams.tol, verdict=beams.verdict,
@@ -388,14 +386,12 @@ def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarra
     shows it empty as well, and the hit cells themselves are kept from the walks. Beams whose
     expected ray ends in known space are left out: under a pose error below a cell they graze
     the corners M had as unknown. Returns the new count."""
-    into = ends_in_unknown(ref, beams.own_expected, beams.own_direction, beams.own_found)
-    into &= ~np.isnan(beams.ranges)
     short = max(cfg.seen_surface_radius, res)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        reach = np.where(beams.ranges > short, 1.0 - short / beams.ranges, 0.0)
-    return int(kernels().flag_open_unknown_walks(ref, enclosed, beams.sensor, beams.hits,
-                                                 reach=reach, into_unknown=into, marks=marks,
-                                                 cells=ws.cells, out=ws.changed, n=n))
+    return int(kernels().flag_unknown_seen_through(
+        ref, enclosed, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
+        expected=beams.own_expected, directions=beams.own_direction, found=beams.own_found,
+        short=short, marks=marks, cap=ws.cells.shape[1], into=ws.into, reach=ws.unknown_reach,
+        out=ws.changed, n=n))
 
 
 def release_unknown_hits(ch_marks: np.ndarray, un_marks: np.ndarray, n_hits: int,
@@ -422,6 +418,45 @@ def push_hits(hitbuf_flat: np.ndarray, ref: np.ndarray, enclosed: np.ndarray, n_
                                    hit_marks=hit_marks, drawn=drawn))
 
 
+# --- steps 2 and 3 in one call ----------------------------------------------------------------
+def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+              marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
+              ws: Workspace) -> tuple[int, int, int, int]:
+    """What ``guard_seen_surfaces``, ``list_unknown_hits`` (with ``grow_into_unknown``),
+    ``flag_changed_cells``, ``flag_unknown_seen_through``, ``release_seen_surfaces``,
+    ``fill_gaps``, ``flag_unchanged_cells``, ``flag_hit_surfaces`` and
+    ``release_unknown_hits`` do one after the other, in one kernel call (``marks``: the
+    changed-flag, unchanged-flag and hit marks). Returns (changed flags, new-obstacle and
+    fill_gaps flags, unchanged flags, unknown cells hit, listed in ``ws.hits_unknown``)."""
+    radius = cfg.seen_surface_radius / res
+    guard = radius if radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
+    side = 2 * int(math.ceil(radius)) + 1
+    ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size) if guard else 0)
+    ws.for_unknown_hits(beams.hits.shape[0])
+    ch_marks, un_marks, hit_marks = marks
+    gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
+    n_ch, n_new, n_gaps, n_un, n_hits = kernels().flag_scan(
+        ref, enclosed, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
+        verdict=beams.verdict, removed_reach=removed_reach(beams), tol=beams.tol,
+        free_reach=beams.free_reach, expected=beams.own_expected,
+        directions=beams.own_direction, found=beams.own_found, guard=guard,
+        unknown_guard=unknown_guard(cfg, res), grow=cfg.grow_into_unknown,
+        short=max(cfg.seen_surface_radius, res), gaps=gaps, margin=cfg.fill_gaps_free_margin,
+        confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
+        ch_marks=ch_marks, un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
+        hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
+        changed=ws.changed, unchanged=ws.unchanged)
+    return int(n_ch), int(n_new + n_gaps), int(n_un), int(n_hits)
+
+
+def removed_reach(beams: Beams) -> np.ndarray:
+    """p_th as a fraction of the way to the hit, per beam: where the removed-obstacle walk
+    ends."""
+    if beams.removed_reach is not None:
+        return beams.removed_reach
+    return 1.0 - beams.skip / beams.ranges
+
+
 # --- buffers and decision ---------------------------------------------------------------------
 def buffer_mask(cfg: UpdaterConfig) -> int:
     return (1 << cfg.buffer_size) - 1
@@ -443,14 +478,30 @@ def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
 
 def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
            decided: np.ndarray, n_moved: int, width: int, cfg: UpdaterConfig,
-           ws: Workspace) -> int:
+           ws: Workspace, stamp: np.ndarray) -> int:
     """The decision rule (n_c >= T; or, with ``unanimous_min``, every flag of a cell observed
     fewer than T times says changed; or n_c plus the 8-neighbours of the same state in M with
-    n >= T reaches T) for the cells whose inputs changed this scan. Returns the change of the
-    number of changed cells."""
+    n >= T reaches T) for the cells whose inputs changed this scan, each once (``stamp``:
+    a bit plane, all clear, as the changed-flag marks are after the push). Returns the change
+    of the number of changed cells."""
     return kernels().decide(hist_flat, seen_flat, ref_flat, decided, moved=ws.moved[:n_moved],
                             width=width, mask=buffer_mask(cfg), threshold=cfg.threshold,
-                            few=cfg.unanimous_min, support=cfg.neighbour_support)
+                            few=cfg.unanimous_min, support=cfg.neighbour_support, stamp=stamp)
+
+
+def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+                    decided: np.ndarray, n_changed: int, n_unchanged: int, width: int,
+                    cfg: UpdaterConfig, ch_marks: np.ndarray, un_marks: np.ndarray,
+                    ws: Workspace) -> int:
+    """``push_flags`` then ``decide`` in one kernel call (the changed-flag marks, all clear
+    after the push, serve the decision as its stamps). Returns the change of the number of
+    changed cells."""
+    ws.for_moved(n_changed + n_unchanged)
+    return int(kernels().push_and_decide(
+        hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
+        unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg), threshold=cfg.threshold,
+        few=cfg.unanimous_min, support=cfg.neighbour_support, width=width, ch_marks=ch_marks,
+        un_marks=un_marks, moved=ws.moved))
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,

@@ -1,0 +1,218 @@
+"""numba kernels of the grid: exact traversal and first hit along beams.
+
+Everything here works in grid units: a point (gx, gy) = ((x - ox) / res, (y - oy) / res), so
+cell (row, col) = (floor(gy), floor(gx)). Kernels take arrays and scalars only. Other packages'
+kernels call ``traverse`` and ``first_hit`` from inside their own njit functions.
+"""
+
+import numpy as np
+from numba import njit
+
+from gridmap.cells import OCCUPIED
+
+# Status codes of first_hit.
+NO_HIT = 0       # nothing blocking within max length
+HIT = 1          # entered a blocking cell at distance t
+LEFT_GRID = 2    # left the grid at distance t without hitting
+
+
+@njit(cache=True)
+def clip_to_box(gx0, gy0, dx, dy, width, height):
+    """Liang-Barsky: the parameter range [t0, t1] within [0, 1] of p0 + t*d inside the box
+    [0, width] x [0, height]; t0 > t1 when the segment misses it."""
+    t0 = 0.0
+    t1 = 1.0
+    ps = (-dx, dx, -dy, dy)
+    qs = (gx0, width - gx0, gy0, height - gy0)
+    for k in range(4):
+        p = ps[k]
+        q = qs[k]
+        if p == 0.0:
+            if q < 0.0:
+                return 1.0, 0.0
+        else:
+            t = q / p
+            if p < 0.0:
+                if t > t0:
+                    t0 = t
+            else:
+                if t < t1:
+                    t1 = t
+    return t0, t1
+
+
+@njit(cache=True)
+def _cell_of(v, n):
+    c = int(np.floor(v))
+    if c < 0:
+        return 0
+    if c >= n:
+        return n - 1
+    return c
+
+
+@njit(cache=True)
+def _axis_step(c, g0, d):
+    """One axis of the grid walk (Amanatides and Woo) from g0 in cell c along d: (step, the
+    parameter between two crossings of that axis's cell edges, the parameter of the first)."""
+    step = 1 if d > 0 else -1
+    if d == 0.0:
+        return step, np.inf, np.inf
+    t_max = ((c + 1 - g0) / d) if d > 0 else ((c - g0) / d)
+    return step, abs(1.0 / d), t_max
+
+
+@njit(cache=True)
+def _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width):
+    """(cx, cy, ex, ey): the cells where the segment, clipped to [t0, t1], enters and leaves
+    the grid. An end point inside the grid is used as given: gx0 + 1.0 * (gx1 - gx0) can round
+    to the other side of a cell edge and lose the end cell."""
+    dx = gx1 - gx0
+    dy = gy1 - gy0
+    if t0 > 0.0:
+        cx = _cell_of(gx0 + t0 * dx, width)
+        cy = _cell_of(gy0 + t0 * dy, height)
+    else:
+        cx = _cell_of(gx0, width)
+        cy = _cell_of(gy0, height)
+    if t1 < 1.0:
+        ex = _cell_of(gx0 + t1 * dx, width)
+        ey = _cell_of(gy0 + t1 * dy, height)
+    else:
+        ex = _cell_of(gx1, width)
+        ey = _cell_of(gy1, height)
+    return cx, cy, ex, ey
+
+
+@njit(cache=True)
+def traverse(gx0, gy0, gx1, gy1, height, width, rows, cols):
+    """Every cell the segment (gx0, gy0)-(gx1, gy1) passes through, in order from the start,
+    clipped to the grid. Writes into ``rows``/``cols`` and returns the count (at most their
+    length). The walk is 4-connected: where the segment crosses a cell corner exactly, the cell
+    beside the corner in x comes first, so no cell is skipped."""
+    dx = gx1 - gx0
+    dy = gy1 - gy0
+    t0, t1 = clip_to_box(gx0, gy0, dx, dy, float(width), float(height))
+    if t0 > t1:
+        return 0
+    cx, cy, ex, ey = _clipped_end_cells(gx0, gy0, gx1, gy1, t0, t1, height, width)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, dx)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, dy)
+    # Exactly |ex - cx| + |ey - cy| unit steps lead to the end cell; counting them (rather than
+    # testing t against the end) keeps the walk from overshooting through rounding.
+    n_steps = abs(ex - cx) + abs(ey - cy)
+    cap = rows.shape[0]
+    n = 0
+    if cap == 0:
+        return 0
+    rows[0] = cy
+    cols[0] = cx
+    n = 1
+    for _ in range(n_steps):
+        if n >= cap:
+            break
+        if cx == ex:
+            go_x = False
+        elif cy == ey:
+            go_x = True
+        else:
+            go_x = t_max_x <= t_max_y
+        if go_x:
+            cx += step_x
+            t_max_x += t_delta_x
+        else:
+            cy += step_y
+            t_max_y += t_delta_y
+        rows[n] = cy
+        cols[n] = cx
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def is_blocking(v, block_unknown):
+    return v == OCCUPIED or (block_unknown and v < 0)
+
+
+@njit(cache=True)
+def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
+    """Walk from (gx0, gy0) along the unit direction (cos_a, sin_a) for at most ``max_len`` grid
+    units. Returns (t, status): the distance to where the ray enters the first blocking cell
+    (status HIT; 0 if it starts in one), or to where it leaves the grid (LEFT_GRID; 0 if it
+    starts outside and unknown blocks), or (max_len, NO_HIT)."""
+    height = data.shape[0]
+    width = data.shape[1]
+    if block_unknown and not (0.0 <= gx0 < width and 0.0 <= gy0 < height):
+        return 0.0, LEFT_GRID  # outside the map is unknown, so it blocks at once
+    # Enter the grid if the start lies outside it.
+    t0, t1 = clip_to_box(gx0, gy0, cos_a * max_len, sin_a * max_len, float(width), float(height))
+    if t0 > t1:
+        return max_len, NO_HIT
+    t = t0 * max_len
+    t_end = t1 * max_len
+    px = gx0 + t * cos_a
+    py = gy0 + t * sin_a
+    cx = _cell_of(px, width)
+    cy = _cell_of(py, height)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
+    # While the next crossing lies safely before both the grid exit and max_len, the next cell
+    # is inside the grid, so this loop, which takes nearly all of a cast's steps, skips the
+    # bounds checks.
+    t_safe = min(t_end, max_len) - 1e-6
+    while True:
+        if is_blocking(data[cy, cx], block_unknown):
+            return t, HIT
+        if t_max_x <= t_max_y:
+            if t_max_x >= t_safe:
+                break
+            t = t_max_x
+            cx += step_x
+            t_max_x += t_delta_x
+        else:
+            if t_max_y >= t_safe:
+                break
+            t = t_max_y
+            cy += step_y
+            t_max_y += t_delta_y
+    # The last cell or two before the exit or max_len: every check.
+    while True:
+        if t_max_x <= t_max_y:
+            t = t_max_x
+            cx += step_x
+            t_max_x += t_delta_x
+        else:
+            t = t_max_y
+            cy += step_y
+            t_max_y += t_delta_y
+        if t > max_len:
+            return max_len, NO_HIT
+        if cx < 0 or cx >= width or cy < 0 or cy >= height or t > t_end + 1e-9:
+            return t, LEFT_GRID
+        if is_blocking(data[cy, cx], block_unknown):
+            return t, HIT
+
+
+@njit(cache=True)
+def cast_ranges(data, sensor, angles, max_len, block_unknown, res, out):
+    """Expected ranges [m] of beams from sensor = (gx, gy, heading [rad]) at ``angles``
+    relative to the heading: ``first_hit`` scaled by ``res``, inf where nothing blocks (a beam
+    leaving the grid is blocked there only when unknown blocks). Doing the whole conversion
+    here saves the wrapper several array passes per scan."""
+    for i in range(angles.shape[0]):
+        a = sensor[2] + angles[i]
+        t, s = first_hit(data, sensor[0], sensor[1], np.cos(a), np.sin(a), max_len,
+                         block_unknown)
+        if s == HIT or (s == LEFT_GRID and block_unknown):
+            out[i] = t * res
+        else:
+            out[i] = np.inf
+
+
+@njit(cache=True)
+def find_root(parent, k):
+    """Union-find: the root of ``k`` in ``parent``, halving the path on the way."""
+    while parent[k] != k:
+        parent[k] = parent[parent[k]]
+        k = parent[k]
+    return k

@@ -1,0 +1,774 @@
+"""numba kernels of the map updater. Arrays and scalars only; each is called once per scan.
+
+Units: points are in grid units, (gx, gy) = ((x - ox) / res, (y - oy) / res), so a point lies in
+cell (row, col) = (floor(gy), floor(gx)); hit points and expected points are (N, 2) arrays of
+such points. Per-beam distances arrive in grid units, computed by the caller from the
+configuration; walks run from the sensor to a fraction (``reach``) of the way to a hit. Cells
+are addressed by their flat index ``row * width + col``. Per-scan marks and the decided state
+are bit planes: one bit per cell, packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
+"""
+
+import numpy as np
+from numba import njit
+
+from ._grid_kernels import NO_HIT, find_root, first_hit, traverse
+from gridmap.cells import FREE, OCCUPIED
+
+from updater.verdicts import BeamVerdict
+
+# The per-beam verdicts as plain ints, which numba compiles in as constants.
+INVALID = int(BeamVerdict.INVALID)
+UNCHANGED = int(BeamVerdict.UNCHANGED)
+SKIPPED = int(BeamVerdict.SKIPPED)
+CHANGE = int(BeamVerdict.CHANGE)
+
+
+# --- bits and counts --------------------------------------------------------------------------
+@njit(cache=True)
+def bit_get(bits, idx):
+    """The bit of cell ``idx``."""
+    return (bits[idx >> 3] >> (idx & 7)) & 1
+
+
+@njit(cache=True)
+def test_and_set(bits, idx):
+    """Set the bit of cell ``idx``; False if it was already set."""
+    b = idx >> 3
+    m = 1 << (idx & 7)
+    if bits[b] & m:
+        return False
+    bits[b] = bits[b] | m
+    return True
+
+
+@njit(cache=True)
+def clear_bits(bits, cells, n):
+    """Clear the bits of the first ``n`` listed cells, and only those."""
+    for k in range(n):
+        idx = cells[k]
+        bits[idx >> 3] = bits[idx >> 3] & ~(1 << (idx & 7))
+
+
+@njit(cache=True)
+def popcount16(v):
+    """The number of set bits of a uint16."""
+    x = np.int64(v)
+    x = x - ((x >> 1) & 0x5555)
+    x = (x & 0x3333) + ((x >> 2) & 0x3333)
+    x = (x + (x >> 4)) & 0x0F0F
+    return (x + (x >> 8)) & 0x1F
+
+
+# --- 1. beam classifier -----------------------------------------------------------------------
+@njit(cache=True)
+def valid_ranges(ranges, r_lo, r_hi, out_r, out_valid):
+    """A beam is valid when its range r [m] is finite, r > 0 (r = 0 is no hit), r >= r_lo and
+    r < r_hi. ``out_r`` gets the ranges as float64, NaN for invalid beams."""
+    for i in range(ranges.shape[0]):
+        r = np.float64(ranges[i])
+        ok = np.isfinite(r) and r > 0.0 and r >= r_lo and r < r_hi
+        out_valid[i] = ok
+        out_r[i] = r if ok else np.nan
+
+
+@njit(cache=True)
+def beam_directions(yaw, angle_min, step, out):
+    """(cos, sin) of beam j at ``yaw + angle_min + j * step`` [rad], for every row of ``out``."""
+    for j in range(out.shape[0]):
+        a = yaw + angle_min + j * step
+        out[j, 0] = np.cos(a)
+        out[j, 1] = np.sin(a)
+
+
+@njit(cache=True)
+def beam_endpoints(ranges, valid, sensor, directions, res, out_hits):
+    """Hit points of the valid beams: the sensor (gx, gy) plus ``ranges`` [m] / ``res`` along
+    ``directions``; NaN for invalid beams. Returns (valid beams, the summed lengths of their
+    walks in cells, the cell count of the box around the sensor and the hits): bounds on the
+    cells any evaluator can flag."""
+    gx0, gy0 = sensor[0], sensor[1]
+    c0, r0 = int(np.floor(gx0)), int(np.floor(gy0))
+    c_lo, c_hi, r_lo, r_hi = c0, c0, r0, r0
+    n_valid = 0
+    walk = 0
+    for i in range(ranges.shape[0]):
+        if not valid[i]:
+            out_hits[i, 0] = out_hits[i, 1] = np.nan
+            continue
+        hx = gx0 + ranges[i] / res * directions[i, 0]
+        hy = gy0 + ranges[i] / res * directions[i, 1]
+        out_hits[i, 0] = hx
+        out_hits[i, 1] = hy
+        n_valid += 1
+        c, rw = int(np.floor(hx)), int(np.floor(hy))
+        walk += abs(c - c0) + abs(rw - r0) + 7
+        c_lo, c_hi = min(c_lo, c), max(c_hi, c)
+        r_lo, r_hi = min(r_lo, rw), max(r_hi, rw)
+    return n_valid, walk, (c_hi - c_lo + 3) * (r_hi - r_lo + 3)
+
+
+@njit(cache=True)
+def cast_virtual(ref, sensor, directions, max_len, out_expected, out_found):
+    """Cast the virtual beams once: beam j from the sensor along ``directions[j]`` ends at the
+    first occupied-or-unknown cell of ``ref``, or where it leaves the map (outside is unknown);
+    ``out_found[j]`` is False when nothing blocks it within ``max_len`` grid units."""
+    gx0, gy0 = sensor[0], sensor[1]
+    for j in range(directions.shape[0]):
+        ca, sa = directions[j, 0], directions[j, 1]
+        t, status = first_hit(ref, gx0, gy0, ca, sa, max_len, True)
+        out_found[j] = status != NO_HIT
+        out_expected[j, 0] = gx0 + t * ca
+        out_expected[j, 1] = gy0 + t * sa
+
+
+@njit(cache=True)
+def classify(hits, valid, pairing, expected, found, half_window, wrap, out_change):
+    """A valid beam i is a detected change when no expected point in the window of virtual
+    beams ``i * ratio +- half_window`` (ratio: virtual beams per measured beam) lies closer
+    than ``pairing[i]`` (D(r_i), grid units) to its hit point. The window is searched nearest
+    index first and wraps around the ends only when ``wrap``. Returns the count of changes."""
+    n, m = hits.shape[0], expected.shape[0]
+    ratio = m // n if n else 1
+    n_change = 0
+    for i in range(n):
+        out_change[i] = False
+        if not valid[i]:
+            continue
+        d2 = pairing[i] * pairing[i]
+        found_near = False
+        for k in range(2 * half_window + 1):
+            j = i * ratio + ((k + 1) // 2 if k % 2 == 1 else -(k // 2))
+            if wrap:
+                j = j % m
+            elif j < 0 or j >= m:
+                continue
+            dx, dy = hits[i, 0] - expected[j, 0], hits[i, 1] - expected[j, 1]
+            if found[j] and dx * dx + dy * dy < d2:
+                found_near = True
+                break
+        if not found_near:
+            out_change[i] = True
+            n_change += 1
+    return n_change
+
+
+@njit(cache=True)
+def run_filter(change, min_run, wrap, out_keep):
+    """Keep a change only inside a run of at least ``min_run`` consecutive changes (a beam that
+    is not a change, invalid ones included, ends a run). With ``wrap`` a run may cross the
+    scan's ends. Returns the count kept."""
+    n = change.shape[0]
+    out_keep[:] = False
+    start = 0
+    if wrap:
+        start = -1
+        for i in range(n):
+            if not change[i]:
+                start = i + 1   # begin after a non-change, so no run is cut at the ends
+                break
+        if start < 0:           # every beam is a change: one run around the circle
+            if n >= min_run:
+                out_keep[:] = True
+                return n
+            return 0
+    kept = 0
+    run = 0
+    for k in range(n + 1):
+        if k < n and change[(start + k) % n]:
+            run += 1
+            continue
+        if run >= min_run:
+            for q in range(k - run, k):
+                out_keep[(start + q) % n] = True
+            kept += run
+        run = 0
+    return kept
+
+
+@njit(cache=True)
+def beam_verdicts(valid, keep, n_skip, wrap, out_verdict):
+    """CHANGE for kept changes, INVALID for invalid beams, SKIPPED for other beams within
+    ``n_skip`` beams of a change, UNCHANGED for the rest. An invalid beam blocks nothing."""
+    n = valid.shape[0]
+    for i in range(n):
+        out_verdict[i] = CHANGE if keep[i] else (UNCHANGED if valid[i] else INVALID)
+    for i in range(n):
+        if not keep[i]:
+            continue
+        for k in range(1, n_skip + 1):
+            for j in (i - k, i + k):
+                if wrap:
+                    j = j % n
+                elif j < 0 or j >= n:
+                    continue
+                if out_verdict[j] == UNCHANGED:
+                    out_verdict[j] = SKIPPED
+
+
+# --- walks along beams ------------------------------------------------------------------------
+@njit(cache=True)
+def walk(ref, sensor, hit, reach, drop_last, cells):
+    """List in ``cells`` (row 0: rows, row 1: cols) the cells of ``ref`` that the segment from
+    the sensor to the point at ``reach`` of the way to ``hit`` passes through, in order,
+    clipped to the map; ``drop_last`` leaves out the cell holding that end point when it lies
+    on the map. Returns the count."""
+    height, width = ref.shape
+    gx0, gy0 = sensor[0], sensor[1]
+    tx = gx0 + reach * (hit[0] - gx0)
+    ty = gy0 + reach * (hit[1] - gy0)
+    n = traverse(gx0, gy0, tx, ty, height, width, cells[0], cells[1])
+    if drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
+        n -= 1
+    return n
+
+
+@njit(cache=True)
+def flag_free_listed(ref, cells, count, marks, out, n):
+    """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are free
+    in ``ref`` and not yet marked, and mark them. Returns the new count. Most cells of a free
+    walk are free, and about half of them new, so the flag goes in without a branch:
+    ``out[n]`` is written for every cell and kept only when the cell is taken (``out`` needs
+    one slot to spare)."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for k in range(count):
+        idx = cells[0, k] * width + cells[1, k]
+        b = idx >> 3
+        bit = np.uint8(1 << (idx & 7))
+        old = marks[b]
+        take = (flat[idx] == FREE) & ((old & bit) == 0)
+        marks[b] = old | (bit if take else np.uint8(0))
+        out[n] = idx
+        n += take
+    return n
+
+
+@njit(cache=True)
+def flag_occupied_listed(ref, cells, count, marks, out, n):
+    """Append to ``out`` (from position n) the first ``count`` cells of ``cells`` that are
+    occupied or unknown in ``ref`` and not yet marked, and mark them. Returns the new count."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for k in range(count):
+        idx = cells[0, k] * width + cells[1, k]
+        if flat[idx] != FREE and test_and_set(marks, idx):
+            out[n] = idx
+            n += 1
+    return n
+
+
+# --- 2. changed-cells evaluator ---------------------------------------------------------------
+@njit(cache=True)
+def disc_is_free(ref, px, py, rad):
+    """True when every cell of ``ref`` that meets the open disc of radius ``rad`` (grid units)
+    around (px, py) is free; cells off the map are unknown, so not free."""
+    height, width = ref.shape
+    for row in range(int(np.floor(py - rad)), int(np.floor(py + rad)) + 1):
+        qy = min(max(py, row), row + 1.0) - py
+        for col in range(int(np.floor(px - rad)), int(np.floor(px + rad)) + 1):
+            qx = min(max(px, col), col + 1.0) - px
+            if qx * qx + qy * qy >= rad * rad:
+                continue
+            if row < 0 or row >= height or col < 0 or col >= width or ref[row, col] != FREE:
+                return False
+    return True
+
+
+@njit(cache=True)
+def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out):
+    """Removed obstacles: the occupied-or-unknown cells from the sensor to p_th of each CHANGE
+    beam i, all but the last, where p_th lies ``reach[i]`` of the way to the hit (none when
+    ``reach[i]`` <= 0: the skip reaches back to the sensor); each cell once (``marks``: cells
+    marked already, as seen surfaces are, get no flag). Returns the count."""
+    n = 0
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE or not reach[i] > 0.0:
+            continue
+        count = walk(ref, sensor, hits[i], reach[i], True, cells)
+        n = flag_occupied_listed(ref, cells, count, marks, out, n)
+    return n
+
+
+@njit(cache=True)
+def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
+    """New obstacles: the hit cell of each CHANGE beam i, if every cell of ``ref`` within
+    ``tol[i]`` (tol(r_i), grid units) of the hit is free, appended to ``out`` from position n;
+    each cell once (``marks``). Returns the new count."""
+    width = ref.shape[1]
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE or not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
+            continue
+        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
+        if test_and_set(marks, idx):
+            out[n] = idx
+            n += 1
+    return n
+
+
+# --- seen-surface guard (not in the paper) ----------------------------------------------------
+@njit(cache=True)
+def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, marks, out):
+    """Mark (in ``marks``, so the removed-obstacle walk passes them by) the cells of ``ref``
+    that come within ``radius`` (grid units) of the hit point of any valid beam and are
+    occupied, or within ``unknown_radius`` and unknown outside the ``enclosed`` regions, and
+    list them in ``out``. Enclosed unknown cells (an object's interior) are left to the walk: a
+    hit near one is on the face of whatever still stands beside it, and the last check closes
+    what stays unknown next to a freed cell. Returns the count listed."""
+    height, width = ref.shape
+    n = 0
+    r2 = radius * radius
+    u2 = unknown_radius * unknown_radius
+    for i in range(hits.shape[0]):
+        if verdict[i] == INVALID:
+            continue
+        x, y = hits[i, 0], hits[i, 1]
+        for row in range(max(int(np.floor(y - radius)), 0),
+                         min(int(np.floor(y + radius)) + 1, height)):
+            dy = max(row - y, 0.0, y - row - 1.0)
+            for col in range(max(int(np.floor(x - radius)), 0),
+                             min(int(np.floor(x + radius)) + 1, width)):
+                v = ref[row, col]
+                if v == FREE:
+                    continue
+                dx = max(col - x, 0.0, x - col - 1.0)
+                idx = row * width + col
+                if dx * dx + dy * dy > (r2 if v == OCCUPIED else u2) or \
+                        (v != OCCUPIED and bit_get(enclosed, idx)):
+                    continue
+                if test_and_set(marks, idx):
+                    out[n] = idx
+                    n += 1
+    return n
+
+
+# --- fill_gaps (not in the paper) -------------------------------------------------------------
+@njit(cache=True)
+def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
+    """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
+    whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has
+    nothing that near); each cell once (``marks``). Returns the new count."""
+    height, width = ref.shape
+    k = clearance
+    for i in range(hits.shape[0]):
+        if verdict[i] != UNCHANGED:
+            continue
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
+        if row0 < k or row0 >= height - k or col0 < k or col0 >= width - k:
+            continue
+        free = True
+        for dr in range(-k, k + 1):
+            for dc in range(-k, k + 1):
+                if ref[row0 + dr, col0 + dc] != FREE:
+                    free = False
+                    break
+            if not free:
+                break
+        if free and test_and_set(marks, row0 * width + col0):
+            out[n] = row0 * width + col0
+            n += 1
+    return n
+
+
+# --- 3. unchanged-cells evaluator -------------------------------------------------------------
+@njit(cache=True)
+def flag_free_unchanged(ref, sensor, hits, reach, verdict, marks, cells, out):
+    """Free: the free cells of ``ref`` from the sensor to ``reach[i]`` of the way to the hit of
+    each UNCHANGED beam i; each cell once (``marks``). Returns the count."""
+    n = 0
+    for i in range(hits.shape[0]):
+        if verdict[i] != UNCHANGED:
+            continue
+        count = walk(ref, sensor, hits[i], reach[i], False, cells)
+        n = flag_free_listed(ref, cells, count, marks, out, n)
+    return n
+
+
+@njit(cache=True)
+def flag_occupied_unchanged(ref, hits, verdict, marks, out, n):
+    """Occupied: every occupied-or-unknown cell of ``ref`` among the hit cell of each
+    UNCHANGED beam and its 4-neighbours, appended to ``out`` from position n; each cell once
+    (``marks``). Returns the new count."""
+    height, width = ref.shape
+    for i in range(hits.shape[0]):
+        if verdict[i] != UNCHANGED:
+            continue
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            row, col = row0 + dr, col0 + dc
+            if 0 <= row < height and 0 <= col < width and ref[row, col] != FREE:
+                if test_and_set(marks, row * width + col):
+                    out[n] = row * width + col
+                    n += 1
+    return n
+
+
+# --- hits confirm M's surfaces (not in the paper) ---------------------------------------------
+@njit(cache=True)
+def flag_hit_surfaces(ref, hits, verdict, marks, out, n):
+    """Unchanged flags, appended to ``out`` from position n, for the occupied cells of ``ref``
+    among the hit cell and its 4-neighbours of each CHANGE or SKIPPED beam whose hit cell lies
+    on the map and is not free in ``ref``; each cell once (``marks``, shared with the
+    unchanged-cells evaluator). Returns the new count."""
+    height, width = ref.shape
+    for i in range(hits.shape[0]):
+        if verdict[i] != CHANGE and verdict[i] != SKIPPED:
+            continue
+        row0 = int(np.floor(hits[i, 1]))
+        col0 = int(np.floor(hits[i, 0]))
+        if not (0 <= row0 < height and 0 <= col0 < width) or ref[row0, col0] == FREE:
+            continue
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            row, col = row0 + dr, col0 + dc
+            if 0 <= row < height and 0 <= col < width and ref[row, col] == OCCUPIED:
+                if test_and_set(marks, row * width + col):
+                    out[n] = row * width + col
+                    n += 1
+    return n
+
+
+# --- growth into the unknown (not in the paper) -----------------------------------------------
+@njit(cache=True)
+def is_open_unknown(ref_flat, enclosed, idx):
+    """Unknown in M and outside the enclosed regions: space M never saw, where the map grows
+    (an enclosed region is an object's interior, which the last check closes)."""
+    v = ref_flat[idx]
+    return v != FREE and v != OCCUPIED and not bit_get(enclosed, idx)
+
+
+@njit(cache=True)
+def list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks, out):
+    """The hit cells of valid beams in open unknown space, each once (``hit_marks``), into
+    ``out``; their changed-flag marks are set too, so that no walk of the scan flags the cells
+    it hits (``clear_bits`` clears them after the walks). Returns the count."""
+    height, width = ref.shape
+    flat = ref.reshape(-1)
+    n = 0
+    for i in range(hits.shape[0]):
+        if verdict[i] == INVALID:
+            continue
+        row, col = int(np.floor(hits[i, 1])), int(np.floor(hits[i, 0]))
+        if not (0 <= row < height and 0 <= col < width):
+            continue
+        idx = row * width + col
+        if is_open_unknown(flat, enclosed, idx) and test_and_set(hit_marks, idx):
+            ch_marks[idx >> 3] = ch_marks[idx >> 3] | (1 << (idx & 7))
+            out[n] = idx
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def flag_open_unknown_walks(ref, enclosed, sensor, hits, reach, into_unknown, marks, cells,
+                            out, n):
+    """Changed flags, appended to ``out`` from position n, for the open unknown cells from the
+    sensor to ``reach[i]`` of the way to the hit of each beam i that looks into unknown space
+    (``into_unknown[i]``), all but the last; each cell once (``marks``). Returns the new
+    count."""
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    for i in range(hits.shape[0]):
+        if not into_unknown[i] or not reach[i] > 0.0:
+            continue
+        count = walk(ref, sensor, hits[i], reach[i], True, cells)
+        for k in range(count):
+            idx = cells[0, k] * width + cells[1, k]
+            if is_open_unknown(flat, enclosed, idx) and test_and_set(marks, idx):
+                out[n] = idx
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def flag_listed_unchanged(cells, marks, out, n):
+    """Unchanged flags for ``cells``, appended to ``out`` from position n unless a cell has one
+    already (``marks``). Returns the new count."""
+    for k in range(cells.shape[0]):
+        if test_and_set(marks, cells[k]):
+            out[n] = cells[k]
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, few, hit_marks,
+              drawn):
+    """The hit buffers of open unknown cells, ``hitbuf = ((hitbuf << 1) | hit) & mask``: 1 for
+    each cell hit this scan, 0 for each seen through (its changed flag); then the ``drawn``
+    bit: hits in at least ``threshold`` of the last observations, or (``few`` > 0) only hits
+    since the first, at least ``few`` of them. Clears ``hit_marks``. Returns the change of
+    the number of drawn cells."""
+    delta = 0
+    n_changed = changed.shape[0]
+    for k in range(n_changed + hit_cells.shape[0]):
+        if k < n_changed:
+            idx, flag = changed[k], 0
+            if hitbuf[idx] == 0 or not is_open_unknown(ref_flat, enclosed, idx):
+                continue            # a 0 into an empty buffer: no change
+        else:
+            idx, flag = hit_cells[k - n_changed], 1
+            hit_marks[idx >> 3] = 0
+        hitbuf[idx] = ((hitbuf[idx] << 1) | flag) & mask
+        now = is_drawn(hitbuf[idx], mask, threshold, few)
+        if now != (bit_get(drawn, idx) == 1):
+            drawn[idx >> 3] = drawn[idx >> 3] ^ (1 << (idx & 7))
+            delta += 1 if now else -1
+    return delta
+
+
+@njit(cache=True)
+def is_drawn(h, mask, threshold, few):
+    """A hit buffer that draws its cell: ``threshold`` hits among the last observations, or
+    with ``few`` > 0 nothing but hits (the low bits all set), at least ``few``."""
+    n = popcount16(h & mask)
+    return n >= threshold or (few > 0 and n >= few and (h & (h + 1)) == 0)
+
+
+@njit(cache=True)
+def decide_drawn(hitbuf, ref_flat, enclosed, mask, threshold, few, drawn):
+    """The ``drawn`` bits over the whole map (on loading a saved state). Returns the count."""
+    total = 0
+    for idx in range(ref_flat.shape[0]):
+        if hitbuf[idx] and is_drawn(hitbuf[idx], mask, threshold, few) and \
+                is_open_unknown(ref_flat, enclosed, idx):
+            drawn[idx >> 3] = drawn[idx >> 3] | (1 << (idx & 7))
+            total += 1
+    return total
+
+
+@njit(cache=True)
+def apply_drawn(drawn, out):
+    """The drawn cells become occupied in ``out`` (flat)."""
+    for b in range(drawn.shape[0]):
+        if drawn[b] == 0:
+            continue
+        for idx in range(b * 8, min(b * 8 + 8, out.shape[0])):
+            if bit_get(drawn, idx):
+                out[idx] = OCCUPIED
+
+
+# --- buffers and decision ---------------------------------------------------------------------
+@njit(cache=True)
+def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
+               out_moved):
+    """Shift the scan's flags into the buffers, changed flags first:
+    ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255;
+    an empty ``seen`` counts nothing, and then ``few`` must be 0) and
+    clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
+    rule for few observations, ``few`` > 0, whose observations are still below the threshold),
+    as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
+    changed too). Returns the count written."""
+    n = 0
+    n_changed = changed.shape[0]
+    counting = seen.shape[0] > 0
+    for k in range(n_changed + unchanged.shape[0]):
+        if k < n_changed:
+            idx, flag = changed[k], 1
+            ch_marks[idx >> 3] = 0
+        else:
+            idx, flag = unchanged[k - n_changed], 0
+            un_marks[idx >> 3] = 0
+        old = hist[idx]
+        watched = few > 0 and ref[idx] == OCCUPIED
+        if old == 0 and flag == 0 and not watched:
+            if counting and seen[idx] < 255:
+                seen[idx] += 1
+            continue            # an unchanged flag into an all-unchanged buffer: no change
+        was = watched and confirmed(hist, seen, ref, idx, mask)
+        if counting and seen[idx] < 255:
+            seen[idx] += 1
+        new = ((old << 1) | flag) & mask
+        hist[idx] = new
+        p_old, p_new = popcount16(old), popcount16(new)
+        crossed = (p_old >= threshold) != (p_new >= threshold)
+        if watched and was != confirmed(hist, seen, ref, idx, mask):
+            crossed = True      # its neighbours' unanimous rule changed too
+        if crossed:
+            out_moved[n] = -1 - idx
+            n += 1
+        elif p_old != p_new or (few > 0 and seen[idx] <= threshold):
+            out_moved[n] = idx
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def confirmed(hist, seen, ref, idx, mask):
+    """An occupied cell of M whose recent flags are not all changed: a surface the scans still
+    see. The unanimous rule frees no occupied cell next to one."""
+    if ref[idx] != OCCUPIED or seen[idx] == 0:
+        return False
+    window = popcount16(mask)
+    return popcount16(hist[idx] & mask) < min(int(seen[idx]), window)
+
+
+@njit(cache=True)
+def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support):
+    """Apply the decision rule to cell ``idx`` (flat arrays) and update its decided bit: changed
+    when n_c >= T; or, with ``few`` > 0, when the cell was observed fewer than T times, at least
+    ``few`` times, and every flag it got says changed (an occupied cell of M only if no occupied
+    8-neighbour is ``confirmed``: a wall grazed by a few beams keeps its cells); or, with
+    ``support``, when n_c plus its 8-neighbours of the same two-state (free /
+    occupied-or-unknown) in ``ref`` with n >= T reaches T. Returns +1, -1 or 0, the change of
+    the number of changed cells."""
+    n = popcount16(hist[idx] & mask)
+    changed = n >= threshold
+    if not changed and few > 0:
+        changed = n >= few and seen[idx] < threshold and n == seen[idx]
+        if changed and ref[idx] == OCCUPIED:     # not a cell of a surface the scans still see
+            height = ref.shape[0] // width
+            row, col = idx // width, idx % width
+            for rr in range(max(row - 1, 0), min(row + 2, height)):
+                for cc in range(max(col - 1, 0), min(col + 2, width)):
+                    j = rr * width + cc
+                    if j != idx and confirmed(hist, seen, ref, j, mask):
+                        changed = False
+    if not changed and support:
+        height = ref.shape[0] // width
+        row, col = idx // width, idx % width
+        occ = ref[idx] != FREE
+        for rr in range(max(row - 1, 0), min(row + 2, height)):
+            for cc in range(max(col - 1, 0), min(col + 2, width)):
+                j = rr * width + cc
+                if j != idx and (ref[j] != FREE) == occ and popcount16(hist[j] & mask) >= threshold:
+                    n += 1
+        changed = n >= threshold
+    if changed == (bit_get(decided, idx) == 1):
+        return 0
+    decided[idx >> 3] = decided[idx >> 3] ^ (1 << (idx & 7))
+    return 1 if changed else -1
+
+
+@njit(cache=True)
+def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support):
+    """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
+    crossed the threshold: no other cell's inputs changed. Returns the change of the number of
+    changed cells."""
+    height = ref.shape[0] // width
+    delta = 0
+    for k in range(moved.shape[0]):
+        idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
+        delta += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
+        if moved[k] >= 0 or not (support or few > 0):
+            continue
+        row, col = idx // width, idx % width
+        for rr in range(max(row - 1, 0), min(row + 2, height)):
+            for cc in range(max(col - 1, 0), min(col + 2, width)):
+                if rr != row or cc != col:
+                    delta += decide_cell(hist, seen, ref, decided, rr * width + cc, width, mask,
+                                         threshold, few, support)
+    return delta
+
+
+@njit(cache=True)
+def decide_all(hist, seen, ref, decided, width, mask, threshold, few, support):
+    """The decision rule over the whole map (on loading a saved state, and in tests)."""
+    total = 0
+    for idx in range(ref.shape[0]):
+        total += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
+    return total
+
+
+# --- output and last check --------------------------------------------------------------------
+@njit(cache=True)
+def apply_changes(ref, decided, enclosed, width, close, hist, out):
+    """``out`` (a copy of ``ref``, flat) gets the changed cells flipped: free -> occupied,
+    occupied or unknown -> free. With ``close``, the last check: each 8-neighbour of a cell
+    that became free that lies in an enclosed unknown region of ``ref`` and is itself unchanged
+    (so still unknown) becomes occupied, unless ``hist`` (flat buffers, or an empty array)
+    holds a changed flag for it: a cell seen through, if not yet often enough to be freed, is
+    left unknown rather than drawn. Returns the count of cells the last check closed."""
+    height = ref.shape[0] // width
+    closed = 0
+    for b in range(decided.shape[0]):
+        if decided[b] == 0:
+            continue
+        for idx in range(b * 8, min(b * 8 + 8, ref.shape[0])):
+            if not bit_get(decided, idx):
+                continue
+            out[idx] = OCCUPIED if ref[idx] == FREE else FREE
+            if not close or ref[idx] == FREE:
+                continue
+            row, col = idx // width, idx % width
+            for rr in range(max(row - 1, 0), min(row + 2, height)):
+                for cc in range(max(col - 1, 0), min(col + 2, width)):
+                    j = rr * width + cc
+                    if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCCUPIED \
+                            and (hist.shape[0] == 0 or hist[j] == 0):
+                        out[j] = OCCUPIED
+                        closed += 1
+    return closed
+
+
+# --- enclosed unknown regions of the reference map (once per map) -----------------------------
+@njit(cache=True)
+def unknown_runs(ref, out_runs):
+    """Runs of unknown cells, row by row, as rows (row, first col, last col) of ``out_runs``.
+    Writes as many as fit and returns how many there are (call with an empty array to
+    count)."""
+    n = 0
+    height, width = ref.shape
+    for row in range(height):
+        col = 0
+        while col < width:
+            if ref[row, col] >= 0:
+                col += 1
+                continue
+            c0 = col
+            while col < width and ref[row, col] < 0:
+                col += 1
+            if n < out_runs.shape[0]:
+                out_runs[n, 0], out_runs[n, 1], out_runs[n, 2] = row, c0, col - 1
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def link_runs(runs, parent):
+    """Union-find over runs: runs in adjacent rows that touch, corners included (8-connected
+    unknown regions), share a root. Runs are in row order, sorted by column within a row."""
+    n = runs.shape[0]
+    for k in range(n):
+        parent[k] = k
+    prev0, prev1 = 0, 0        # runs of the previous row: [prev0, prev1)
+    k = 0
+    while k < n:
+        cur0 = k
+        while k < n and runs[k, 0] == runs[cur0, 0]:
+            k += 1
+        i, j = prev0, cur0
+        if prev1 > prev0 and runs[prev0, 0] == runs[cur0, 0] - 1:
+            while i < prev1 and j < k:
+                if runs[i, 1] <= runs[j, 2] + 1 and runs[j, 1] <= runs[i, 2] + 1:
+                    a, b = find_root(parent, i), find_root(parent, j)
+                    parent[max(a, b)] = min(a, b)
+                if runs[i, 2] < runs[j, 2]:
+                    i += 1
+                else:
+                    j += 1
+        prev0, prev1 = cur0, k
+
+
+@njit(cache=True)
+def mark_enclosed(runs, parent, height, width, max_cells, bits):
+    """Set the bits of the cells of every unknown region that touches no map border and has at
+    most ``max_cells`` cells. Returns the count of cells marked."""
+    n = runs.shape[0]
+    size = np.zeros(n, np.int64)
+    border = np.zeros(n, np.bool_)
+    for k in range(n):
+        root = find_root(parent, k)
+        row, c0, c1 = runs[k, 0], runs[k, 1], runs[k, 2]
+        size[root] += c1 - c0 + 1
+        if row == 0 or row == height - 1 or c0 == 0 or c1 == width - 1:
+            border[root] = True
+    marked = 0
+    for k in range(n):
+        root = find_root(parent, k)
+        if border[root] or size[root] > max_cells:
+            continue
+        for col in range(runs[k, 1], runs[k, 2] + 1):
+            test_and_set(bits, runs[k, 0] * width + col)
+        marked += runs[k, 2] - runs[k, 1] + 1
+    return marked

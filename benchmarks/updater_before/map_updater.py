@@ -1,0 +1,451 @@
+"""The map updater: a reference map M, per-cell flag buffers, and one call per scan.
+
+State, for an H x W map (nothing else grows with the map):
+
+=================  ==============  ==========================================================
+array              bytes per cell  what
+=================  ==============  ==========================================================
+reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
+buffers            2               uint16 shift registers of the last N_b flags
+flag counts        1               uint8: flags a cell ever got (saturating at 255)
+decided            1/8             bit per cell: the decision rule says "changed"
+enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
+scan marks         2/8             bits per cell, set and cleared within one scan
+hit buffers        2               uint16 shift registers of hits in open unknown space
+drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
+=================  ==============  ==========================================================
+
+The last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
+it off the hit buffers and hit marks take no room).
+
+A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
+unique with the scan-mark bits (set when a cell is listed, cleared after the push), never by
+zeroing a map-sized array.
+
+Bad input: NaN, inf, negative and zero ranges are invalid beams. A non-finite sensor pose,
+odometry pose or scan time raises ``UpdaterError`` before anything is changed. A sensor pose
+off the map is a counted skip (``ScanReport.status is ScanStatus.OFF_MAP``), and so is a pose
+the caller's ``pose_check`` refuses (``ScanStatus.REFUSED``; e.g.
+``localization.confidence.PoseCheck``).
+"""
+
+from __future__ import annotations
+
+import enum
+import io
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
+from gridmap.atomic import write_atomically
+from gridmap.files import FileInputError, check_regular_file
+
+from . import steps
+from updater.config import UpdaterConfig, UpdaterError
+from updater.gating import CONFIRMING, SKIPPED_OFF_MAP, Gate
+
+STATE_FORMAT = 1
+
+
+class ScanStatus(enum.Enum):
+    """What became of a scan given to ``MapUpdater.process``."""
+
+    PROCESSED = "processed"   # classified, flagged, pushed and decided
+    LOST = "lost"             # classified, then dropped by the lost check: no flags
+    GATED = "gated"           # not processed: the gate (``ScanReport.reason`` says which rule)
+    OFF_MAP = "off map"       # not processed: the sensor pose lies off the map
+    REFUSED = "refused"       # not processed: the pose check refused the pose
+
+
+@dataclass(frozen=True, eq=False)
+class ScanReport:
+    """What one call of ``MapUpdater.process`` did."""
+
+    time: float                    # [s] the scan's time
+    status: ScanStatus
+    reason: str = ""               # for people: the gate's rule, or the pose check's reason
+    valid_beams: int = 0
+    detected_changes: int = 0      # beams kept as detected changes by the run filter
+    raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
+    changed_flags: int = 0         # cells that got a changed flag
+    new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
+    unchanged_flags: int = 0       # cells that got an unchanged flag
+    changed_cells: int = 0         # cells whose state differs from M, after this scan
+    verdicts: np.ndarray | None = None   # a BeamVerdict per beam (int8), None when not classified
+    # the sensor pose the scan was placed at: as given, or as the pose check refined it; None
+    # when the pose check refused it
+    sensor_pose: Pose2D | None = None
+
+    @property
+    def processed(self) -> bool:
+        """Classified (then flagged, or dropped as lost)."""
+        return self.status in (ScanStatus.PROCESSED, ScanStatus.LOST)
+
+    @property
+    def dropped_as_lost(self) -> bool:
+        return self.status is ScanStatus.LOST
+
+    def summary(self) -> dict:
+        """The report without the per-beam verdicts, as plain values."""
+        out = {k: v for k, v in vars(self).items() if k != "verdicts"}
+        out["status"] = self.status.value
+        if self.sensor_pose is not None:
+            out["sensor_pose"] = list(self.sensor_pose.as_array())
+        return out
+
+
+class MapUpdater:
+    """The map updater of docs/algorithm.md on a fixed reference map.
+
+    ``process(scan, sensor_pose, odometry)`` once per scan; ``updated_map()`` at any time.
+    ``sensor_pose`` is the lidar's pose in the map frame (the robot pose already composed with
+    the lidar's mount); ``odometry`` the robot's odom-frame pose at the scan's time, used for
+    gating only.
+    """
+
+    def __init__(self, reference_map: OccupancyGrid, config: UpdaterConfig | None = None):
+        if not isinstance(reference_map, OccupancyGrid):
+            raise UpdaterError(f"reference_map must be a gridmap.OccupancyGrid, got "
+                               f"{type(reference_map).__name__}")
+        config = UpdaterConfig() if config is None else config
+        if not isinstance(config, UpdaterConfig):
+            raise UpdaterError(f"config must be an UpdaterConfig, got {type(config).__name__}")
+        if reference_map.data.size >= 2**31:
+            raise UpdaterError(f"reference map of shape {reference_map.shape} has too many "
+                               f"cells (at most 2**31 - 1)")
+        self.config = config
+        self._ref = np.ascontiguousarray(reference_map.data, dtype=np.int8).copy()
+        self._ref.flags.writeable = False
+        self._res = reference_map.resolution
+        self._origin = reference_map.origin
+        self._hist = np.zeros(self._ref.shape, np.uint16)
+        # flags ever pushed, saturating: only the unanimous rule needs them
+        self._seen = np.zeros(self._ref.shape if config.unanimous_min else (0, 0), np.uint8)
+        n_bytes = (self._ref.size + 7) // 8
+        self._decided = np.zeros(n_bytes, np.uint8)
+        self._ch_marks = np.zeros(n_bytes, np.uint8)
+        self._un_marks = np.zeros(n_bytes, np.uint8)
+        self._enclosed = np.zeros(n_bytes, np.uint8)
+        # growth into the unknown: hit buffers of open unknown cells, their drawn bits, marks
+        self._hitbuf = np.zeros(self._ref.shape if config.grow_into_unknown else (0, 0),
+                                np.uint16)
+        self._drawn = np.zeros(n_bytes, np.uint8)
+        self._hit_marks = np.zeros(n_bytes if config.grow_into_unknown else 0, np.uint8)
+        self._n_drawn = 0
+        if config.last_check:
+            max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
+            self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
+        self._n_changed = 0
+        self._gate = Gate(config)
+        self._counts = {"scans": 0, "processed": 0, "gated": 0, "lost": 0, "skipped": 0}
+        self._ws = steps.Workspace()
+
+    # --- the per-scan call --------------------------------------------------------------------
+    def process(self, scan: Scan, sensor_pose: Pose2D, odometry: Pose2D | None = None,
+                pose_check: Callable[[], PoseVerdict] | None = None) -> ScanReport:
+        """Gate, classify, flag, push and decide for one scan. See the module docstring for
+        bad input.
+
+        ``pose_check``, when given, is asked only for scans that pass the gate (so a costly
+        check runs a few times per metre, not at the scan rate) and returns a
+        ``gridmap.PoseVerdict``: accepted (the pose is used as given), refined (that sensor
+        pose, e.g. ``sensor_pose`` matched to M, is used instead) or refused (the scan is a
+        counted skip that, like a lost scan, does not advance the gate)."""
+        self._check_input(scan, sensor_pose, odometry)
+        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
+        self._counts["scans"] += 1
+        t = float(scan.time)
+        gate_pose = sensor_pose if odometry is None else odometry
+        if cfg.gating:
+            reason = self._gate.check(t, gate_pose, odometry is not None,
+                                      math.degrees(scan.fov()))
+            if reason:
+                self._counts["gated"] += 1
+                n_un = self._confirm(scan, sensor_pose) if reason in CONFIRMING else 0
+                return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
+                                  changed_cells=self._n_changed, sensor_pose=sensor_pose)
+        placed, sensor, status, reason = self._placed_pose(sensor_pose, pose_check)
+        if status is not None:
+            self._counts["skipped"] += 1
+            return ScanReport(t, status, reason, changed_cells=self._n_changed,
+                              sensor_pose=placed)
+
+        beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws)
+        self._counts["processed"] += 1
+        report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
+                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy(),
+                      sensor_pose=placed)
+        if steps.is_lost(beams, cfg, self._ref):
+            self._counts["lost"] += 1
+            return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
+        n_ch, n_new, n_un = self._flag_push_decide(beams)
+        if cfg.gating:
+            self._gate.mark_processed(t, gate_pose)
+        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
+                          new_obstacle_flags=n_new, unchanged_flags=n_un,
+                          changed_cells=self._n_changed + self._n_drawn, **report)
+
+    def _flag_push_decide(self, beams) -> tuple[int, int, int]:
+        """Steps 2-3 and the buffers for a scan past the lost check: (changed flags,
+        new-obstacle flags, unchanged flags)."""
+        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
+        grow = cfg.grow_into_unknown
+        # the seen-surface guard, fill_gaps, the growth into the unknown and the hits that
+        # confirm M's surfaces (flag_hit_surfaces) are not in the paper
+        guarded = steps.guard_seen_surfaces(ref, beams, cfg, res, self._ch_marks,
+                                            self._enclosed, ws)
+        n_hits = steps.list_unknown_hits(ref, beams, self._enclosed, self._hit_marks,
+                                         self._ch_marks, ws) if grow else 0
+        n_ch, n_new = steps.flag_changed_cells(ref, beams, self._ch_marks, ws)
+        if grow:
+            n_ch = steps.flag_unknown_seen_through(ref, beams, self._enclosed, cfg, res,
+                                                   self._ch_marks, ws, n_ch)
+        steps.release_seen_surfaces(self._ch_marks, guarded, ws)
+        n_ch, n_gaps = steps.fill_gaps(ref, beams, cfg, res, self._ch_marks, ws, n_ch)
+        n_un = steps.flag_unchanged_cells(ref, beams, self._un_marks, ws)
+        n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
+        if grow:
+            n_un = steps.release_unknown_hits(self._ch_marks, self._un_marks, n_hits, ws, n_un)
+        self._push_and_decide(n_ch, n_un)
+        if grow:
+            self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
+                                             n_hits, n_ch, cfg, self._hit_marks, self._drawn,
+                                             ws)
+        return n_ch, n_new + n_gaps, n_un
+
+    def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
+        """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the
+        gate held back as a view already taken (the robot has not moved, or only turned) hits,
+        and none of its other flags. A robot standing still or spinning then cannot fill a
+        buffer with changes seen from one place, and its scans still confirm the surfaces it
+        sees, as the scans around them do. (Not their free walks: the pose check, asked only
+        for the scans let through, does not vouch for these poses, and a walk placed a little
+        off crosses the face of a new object.) Returns the count of unchanged flags (0 for a
+        scan not confirmed: the option off, the sensor off the map, or the scan lost)."""
+        cfg, ref, ws = self.config, self._ref, self._ws
+        sensor = steps.to_grid(sensor_pose, self._origin, self._res)
+        if not cfg.gate_confirm or not self._on_map(sensor):
+            return 0
+        beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws)
+        if steps.is_lost(beams, cfg, ref):
+            return 0
+        n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
+        n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
+        self._push_and_decide(0, n_un)
+        return n_un
+
+    def _push_and_decide(self, n_changed: int, n_unchanged: int) -> None:
+        """The scan's flags listed in the workspace into the buffers, then the decision."""
+        cfg, ref, ws = self.config, self._ref.reshape(-1), self._ws
+        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
+        n_moved = steps.push_flags(hist, seen, ref, n_changed, n_unchanged, cfg, self._ch_marks,
+                                   self._un_marks, ws)
+        self._n_changed += steps.decide(hist, seen, ref, self._decided, n_moved,
+                                        self._ref.shape[1], cfg, ws)
+
+    def _placed_pose(self, sensor_pose: Pose2D, pose_check):
+        """(pose, its grid coordinates, None, "") for a scan to process: the given sensor pose,
+        or the one the pose check refined it to; (pose or None, ..., status, reason) for one to
+        skip."""
+        placed = sensor_pose
+        sensor = steps.to_grid(placed, self._origin, self._res)
+        verdict = PoseVerdict.accepted()
+        if pose_check is not None and self._on_map(sensor):
+            verdict = pose_check()
+            if not isinstance(verdict, PoseVerdict):
+                raise UpdaterError(f"pose_check must return a gridmap.PoseVerdict, got "
+                                   f"{type(verdict).__name__}")
+            if verdict.verdict is Verdict.REFINED:
+                if not verdict.sensor_pose.is_finite():
+                    raise UpdaterError(f"pose_check returned a non-finite sensor pose "
+                                       f"{verdict.sensor_pose}")
+                placed = verdict.sensor_pose
+                sensor = steps.to_grid(placed, self._origin, self._res)
+        if not self._on_map(sensor):
+            return placed, sensor, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
+        if verdict.is_refused:
+            return None, sensor, ScanStatus.REFUSED, verdict.reason
+        return placed, sensor, None, ""
+
+    def _on_map(self, sensor: np.ndarray) -> bool:
+        height, width = self._ref.shape
+        return 0 <= sensor[0] < width and 0 <= sensor[1] < height
+
+    @staticmethod
+    def _check_input(scan, sensor_pose, odometry):
+        if not isinstance(scan, Scan):
+            raise UpdaterError(f"scan must be a gridmap.Scan, got {type(scan).__name__}")
+        if not isinstance(sensor_pose, Pose2D):
+            raise UpdaterError(f"sensor_pose must be a gridmap.Pose2D, got "
+                               f"{type(sensor_pose).__name__}")
+        if not sensor_pose.is_finite():
+            raise UpdaterError(f"sensor pose must be finite, got {sensor_pose}")
+        if odometry is not None and not (isinstance(odometry, Pose2D) and odometry.is_finite()):
+            raise UpdaterError(f"odometry must be None or a finite gridmap.Pose2D, got "
+                               f"{odometry!r}")
+        if not math.isfinite(scan.time):
+            raise UpdaterError(f"scan time must be finite, got {scan.time}")
+
+    # --- results ------------------------------------------------------------------------------
+    @property
+    def reference_map(self) -> OccupancyGrid:
+        """A copy of M."""
+        return OccupancyGrid(self._ref.copy(), self._res, self._origin)
+
+    @property
+    def stats(self) -> dict:
+        """Counts of scans: seen, processed (classified), gated, lost (processed, then dropped
+        by the lost check), skipped (sensor off the map, or refused by the pose check)."""
+        return dict(self._counts)
+
+    def updated_map(self) -> OccupancyGrid:
+        """M with the changed cells flipped and the last check applied (O(map); on demand)."""
+        # with the unanimous rule, interiors seen through are not closed (docs/real_changes.md)
+        spare = self._hist if self.config.unanimous_min else None
+        cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
+                                        self.config.last_check, self._drawn, spare)
+        return OccupancyGrid(cells, self._res, self._origin)
+
+    def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the cells the decision rule marks changed, in row-major order.
+        Cells drawn by the last check, and those of unknown space drawn by the growth into
+        it (``drawn_cells``), are not among them (see ``updated_map``)."""
+        bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
+        return np.unravel_index(np.flatnonzero(bits), self._ref.shape)
+
+    def drawn_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the open unknown cells of M that the scans hit often enough to be
+        drawn occupied (``UpdaterConfig.grow_into_unknown``)."""
+        bits = np.unpackbits(self._drawn, bitorder="little")[:self._ref.size]
+        return np.unravel_index(np.flatnonzero(bits), self._ref.shape)
+
+    @property
+    def n_changed(self) -> int:
+        return self._n_changed
+
+    def change_counts(self) -> np.ndarray:
+        """n_c, the changed flags in each cell's buffer, as a uint8 (H, W) array."""
+        return np.bitwise_count(self._hist & steps.buffer_mask(self.config)).astype(np.uint8)
+
+    def evidence_summary(self) -> dict:
+        """Cells whose buffers hold evidence of change that has not (or not yet) changed them:
+        ``pending_cells`` (at least one changed flag among the last N_b, not changed in the
+        output), of which ``pending_few_observations`` were observed fewer than T times in
+        all and ``pending_outvoted`` more often (their unchanged flags outweigh the changed
+        ones); those two are None when the flags are not counted (``unanimous_min`` 0).
+        O(map); for summaries, not per scan."""
+        bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
+        pending = (self._hist.reshape(-1) != 0) & (bits == 0)
+        n_pending = int(pending.sum())
+        if not self._seen.size:     # flags not counted (unanimous_min 0): not split
+            return {"pending_cells": n_pending, "pending_few_observations": None,
+                    "pending_outvoted": None}
+        n_few = int((pending & (self._seen.reshape(-1) < self.config.threshold)).sum())
+        return {"pending_cells": n_pending, "pending_few_observations": n_few,
+                "pending_outvoted": n_pending - n_few}
+
+    def enclosed_unknown(self) -> np.ndarray:
+        """Boolean (H, W) mask of the cells the last check may close."""
+        bits = np.unpackbits(self._enclosed, bitorder="little")[:self._ref.size]
+        return bits.reshape(self._ref.shape).astype(bool)
+
+    def state_bytes(self) -> int:
+        """Bytes of every array the updater holds, the per-scan workspace included."""
+        arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks,
+                  self._un_marks, self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
+        return sum(a.nbytes for a in arrays) + self._ws.nbytes()
+
+    # --- stop and resume ----------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the whole state to ``path`` (npz): written to a temporary file beside it and
+        renamed, so a crash never leaves a half-written state."""
+        path = Path(path)
+        meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
+                "resolution": self._res, "origin": list(self._origin),
+                "gate": self._gate.state(), "counts": self._counts}
+        buf = io.BytesIO()
+        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
+                            hist=self._hist, hits=self._hitbuf, seen=self._seen)
+        try:
+            write_atomically(path, buf.getvalue())
+        except OSError as e:
+            raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
+
+    def _restore_buffers(self, path, hist: np.ndarray, hits: np.ndarray | None,
+                         seen: np.ndarray | None = None) -> None:
+        """Take saved buffers (refused unless they fit the map and the configuration) and
+        decide every cell from them. A state saved before the flags were counted gives each
+        cell with flags the most observations (so none of them is decided by few)."""
+        if seen is None:            # saved before flags were counted
+            seen = np.where(hist != 0, 255, 0).astype(np.uint8) if self._seen.size else \
+                np.zeros((0, 0), np.uint8)
+        if seen.shape != self._seen.shape or seen.dtype != np.uint8:
+            raise UpdaterError(f"{path}: flag counts do not fit the reference map and config")
+        self._seen[...] = seen
+        mask = np.uint16(steps.buffer_mask(self.config))
+        for name, saved, into in (("buffers", hist, self._hist),
+                                  ("hit buffers", hits, self._hitbuf)):
+            if saved is None or (saved.size == 0 and into.size == 0):
+                continue
+            if saved.shape != into.shape or saved.dtype != np.uint16 or np.any(saved & ~mask):
+                raise UpdaterError(f"{path}: {name} do not fit the reference map and config")
+            into[...] = saved
+        ref = self._ref.reshape(-1)
+        self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
+                                                          self._seen.reshape(-1), ref,
+                                                          self._ref.shape[1], self.config)
+        if self.config.grow_into_unknown:
+            self._n_drawn = int(steps.kernels().decide_drawn(
+                self._hitbuf.reshape(-1), ref, self._enclosed, mask=mask,
+                threshold=self.config.threshold, few=self.config.unanimous_min,
+                drawn=self._drawn))
+
+    @classmethod
+    def load(cls, path) -> MapUpdater:
+        """An updater in exactly the state ``save`` wrote."""
+        path = Path(path)
+
+        try:
+            check_regular_file(path, "updater state file")
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                ref, hist = z["reference"], z["hist"]
+                # states saved before the growth into the unknown have no hit buffers
+                hits = z["hits"] if "hits" in z.files else None
+                seen = z["seen"] if "seen" in z.files else None
+        except FileInputError as e:
+            raise UpdaterError(str(e)) from None
+        # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
+        # many kinds of error (EOFError when empty, zlib.error and tokenize's TokenError for
+        # overwritten bytes); whatever they raise, the file is not a state.
+        except Exception as e:  # noqa: BLE001
+            raise UpdaterError(f"{path}: not a readable updater state file "
+                               f"({type(e).__name__}: {' '.join(str(e).split())})") from None
+        if not isinstance(meta, dict) or meta.get("format") != STATE_FORMAT:
+            got = meta.get("format") if isinstance(meta, dict) else None
+            raise UpdaterError(f"{path}: state format {got!r}, expected {STATE_FORMAT}")
+        missing = [k for k in ("config", "resolution", "origin", "gate", "counts")
+                   if k not in meta]
+        if missing:
+            raise UpdaterError(f"{path}: state lacks {', '.join(missing)}")
+        config = UpdaterConfig.from_dict(meta["config"], source=str(path))
+        try:
+            grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))
+        except (GridError, TypeError, ValueError) as e:
+            raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
+        updater = cls(grid, config)
+        updater._restore_buffers(path, hist, hits, seen)
+        try:
+            updater._gate.restore(meta["gate"])
+        except (ValueError, TypeError) as e:
+            raise UpdaterError(f"{path}: {e}") from None
+        try:
+            updater._counts = {k: int(meta["counts"][k]) for k in updater._counts}
+        except (KeyError, TypeError, ValueError) as e:
+            raise UpdaterError(f"{path}: scan counts unreadable: {e}") from None
+        return updater

@@ -1,0 +1,498 @@
+"""The steps of docs/algorithm.md, one function each, in the order a scan goes through them:
+``classify_beams`` -> ``is_lost`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` ->
+``push_flags`` -> ``decide``. The rules that are not in the paper are steps of their own:
+``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the changed-cells
+evaluator, ``fill_gaps`` after it, and ``flag_hit_surfaces`` after the unchanged-cells
+evaluator. ``close_outlines`` builds the output map on demand,
+``enclosed_unknown`` prepares the last check once per reference map.
+
+Each function computes the per-beam quantities it needs with NumPy, in grid units, from the
+configuration's own methods (``UpdaterConfig.pairing_distance`` and the like), and calls the
+kernels of ``updater._kernels`` once each for the whole scan. Points are in grid units,
+(gx, gy) = ((x - ox) / res, (y - oy) / res); cells are addressed by flat index
+``row * width + col``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gridmap import UNKNOWN, Scan
+
+from updater.config import UpdaterConfig
+
+
+@functools.cache
+def kernels():
+    """The kernels module: numba is imported on first use, not with the package. Cached, as
+    an import statement costs about as much as a small kernel's call."""
+    from . import _kernels
+
+    return _kernels
+
+
+@dataclass
+class Beams:
+    """The classifier's result for one scan and the per-beam quantities the evaluators use
+    (some are views into the workspace: valid until the next scan). ``verdict`` holds a
+    ``BeamVerdict`` per beam; the float arrays are NaN for invalid beams."""
+
+    sensor: np.ndarray      # (gx, gy, yaw) [grid units, rad]
+    ranges: np.ndarray      # [m], float64
+    hits: np.ndarray        # (N, 2) hit points [grid units]
+    pairing: np.ndarray     # D(r_i) [grid units]
+    tol: np.ndarray         # tol(r_i) [grid units]
+    skip: np.ndarray        # |p_i - p_th| [m]: what the removed-obstacle walk leaves out
+    free_reach: np.ndarray  # the free walk ends at this fraction of the way to the hit
+    verdict: np.ndarray     # int8
+    valid: int              # valid beams
+    raw_changes: int        # detected changes before the run filter
+    changes: int            # detected changes kept by the run filter
+    # per beam, for the lost check: the beam's own expected point, whether its virtual ray
+    # found a blocking cell, the ray's direction, and whether the beam is a detected change
+    own_expected: np.ndarray | None = None
+    own_found: np.ndarray | None = None
+    own_direction: np.ndarray | None = None
+    change: np.ndarray | None = None
+
+
+class Workspace:
+    """Scratch arrays reused from scan to scan, grown when a scan needs more; nothing here
+    outlives a scan. Sizes follow the scan (beams, cells it reaches), never the map."""
+
+    def __init__(self):
+        self._beams = -1
+        self._virtual = -1
+        self._walk = -1
+        self._flags = -1
+        self._moved = -1
+        self._protected = -1
+
+    def for_beams(self, n: int, m: int, walk: int) -> None:
+        if n != self._beams:
+            self._beams = n
+            self.r = np.zeros(n, np.float64)
+            self.hits = np.zeros((n, 2), np.float64)
+            self.valid = np.zeros(n, np.bool_)
+            self.change = np.zeros(n, np.bool_)
+            self.keep = np.zeros(n, np.bool_)
+            self.verdict = np.zeros(n, np.int8)
+        if m != self._virtual:
+            self._virtual = m
+            self.expected = np.zeros((m, 2), np.float64)
+            self.found = np.zeros(m, np.bool_)
+        if walk > self._walk:
+            self._walk = walk
+            self.cells = np.zeros((2, walk), np.int64)    # rows, cols of one walk
+
+    def for_flags(self, capacity: int) -> None:
+        if capacity > self._flags:
+            capacity = int(capacity * 1.25) + 64
+            self._flags = capacity
+            self.changed = np.zeros(capacity, np.int32)
+            self.unchanged = np.zeros(capacity, np.int32)
+
+    def for_unknown_hits(self, beams: int) -> None:
+        if beams > getattr(self, "_unknown_hits", -1):
+            self._unknown_hits = beams
+            self.hits_unknown = np.zeros(beams, np.int32)
+
+    def for_moved(self, capacity: int) -> None:
+        if capacity > self._moved:
+            self._moved = int(capacity * 1.25) + 64
+            self.moved = np.zeros(self._moved, np.int32)
+
+    def for_protected(self, capacity: int) -> None:
+        if capacity > self._protected:
+            self._protected = int(capacity * 1.25) + 64
+            self.protected = np.zeros(self._protected, np.int32)
+
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
+
+
+def to_grid(sensor_pose, origin, res) -> np.ndarray:
+    """(gx, gy, yaw) of a map-frame pose."""
+    return np.array([(sensor_pose.x - origin[0]) / res, (sensor_pose.y - origin[1]) / res,
+                     sensor_pose.theta], dtype=np.float64)
+
+
+# --- 1. beam classifier -----------------------------------------------------------------------
+def valid_ranges(scan: Scan, r_hi: float, ws: Workspace) -> np.ndarray:
+    """The ranges [m] as float64 in ``ws.r``, NaN for invalid beams, and ``ws.valid``. A beam is
+    invalid when its range is not finite, not above 0 (r = 0 is no hit), below the scan's
+    range_min, or at or beyond ``r_hi`` = min(max_range, the scan's range_max)."""
+    kernels().valid_ranges(scan.ranges, float(scan.range_min), float(r_hi), ws.r, ws.valid)
+    return ws.r
+
+
+def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
+    """The range-dependent distances of docs/algorithm.md for every beam, from the config: D(r_i)
+    and tol(r_i) [grid units], and the removed-obstacle skip [m]."""
+    return (cfg.pairing_distance(ranges) / res, cfg.new_obstacle_radius(ranges) / res,
+            cfg.removed_skip(ranges))
+
+
+def hit_points(scan: Scan, sensor: np.ndarray, res: float, ratio: int,
+               ws: Workspace) -> tuple[np.ndarray, int, int]:
+    """Hit points of the valid beams into ``ws.hits`` (``ws.r``, ``ws.valid`` ready), and the
+    directions of the virtual beams, ``ratio`` per measured angular step. Returns (virtual
+    directions (M, 2), valid beams, a bound on the cells any evaluator can flag)."""
+    k = kernels()
+    n = scan.beams
+    step = scan.angle_increment / ratio
+    virtual = np.empty((n * ratio, 2))
+    k.beam_directions(sensor[2], scan.angle_min, step, virtual)
+    measured = virtual      # one virtual beam per step: the very same angles
+    if ratio != 1:
+        measured = np.empty((n, 2))
+        k.beam_directions(sensor[2], float(scan.angle_min), float(scan.angle_increment),
+                          measured)
+    n_valid, walk, box = k.beam_endpoints(ws.r, ws.valid, sensor, measured, res, ws.hits)
+    return virtual, n_valid, min(walk, box)
+
+
+def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
+                   cfg: UpdaterConfig, ws: Workspace) -> Beams:
+    """Valid beams, hit points, the per-beam distances, virtual beams cast once each, the
+    windowed comparison with D(r), the run filter and the N_skip neighbourhood of the changes.
+    The window and the run filter wrap around the scan's ends only when the scan covers 360
+    degrees."""
+    k = kernels()
+    n = scan.beams
+    ratio = cfg.virtual_to_measured_ratio
+    r_hi = min(cfg.max_range, scan.range_max)
+    max_len = (r_hi + cfg.cast_margin) / res
+    ws.for_beams(n, n * ratio, 2 * int(math.ceil(max_len)) + 8)
+    ranges = valid_ranges(scan, r_hi, ws)
+    virtual, n_valid, bound = hit_points(scan, sensor, res, ratio, ws)
+    k.cast_virtual(ref, sensor, virtual, max_len, ws.expected, ws.found)
+    step = scan.angle_increment / ratio
+    half = int(math.floor(math.radians(cfg.window_deg) / abs(step) + 1e-9)) if n else 0
+    # a window wider than the scan searches nothing more; a tiny angle_increment (1e-12 rad)
+    # would otherwise ask the kernel for 1e11 beams, holding the interpreter for hours
+    half = min(half, n * ratio)
+    wrap = scan.covers_full_circle()
+    pairing, tol, skip = beam_distances(ranges, res, cfg)
+    raw = k.classify(ws.hits, ws.valid, pairing=pairing, expected=ws.expected, found=ws.found,
+                     half_window=half, wrap=wrap, out_change=ws.change)
+    kept = k.run_filter(ws.change, cfg.min_run, wrap, ws.keep)
+    k.beam_verdicts(ws.valid, ws.keep, cfg.n_skip, wrap, ws.verdict)
+    # No evaluator can flag more cells than the bound or the map holds; the n more leave room
+    # for an unchanged flag at each beam's hit cell.
+    ws.for_flags(min(bound, ref.size) + n)
+    return Beams(sensor, ranges, ws.hits, pairing, tol, skip, np.full(n, cfg.free_fraction),
+                 ws.verdict, n_valid, raw, kept, ws.expected[::ratio][:n],
+                 ws.found[::ratio][:n], virtual[::ratio][:n], ws.change[:n])
+
+
+def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
+                    found: np.ndarray) -> np.ndarray:
+    """Per beam: its expected ray stops at an unknown cell of M (or leaves the map, whose
+    outside is unknown). The expected point is where the ray enters that cell: a hair further
+    along the ray lies inside it."""
+    inside = expected + 1e-4 * directions
+    col = np.floor(inside[:, 0]).astype(np.int64)
+    row = np.floor(inside[:, 1]).astype(np.int64)
+    on_map = (col >= 0) & (row >= 0) & (col < ref.shape[1]) & (row < ref.shape[0])
+    cell = np.full(len(col), UNKNOWN, np.int8)
+    cell[on_map] = ref[row[on_map], col[on_map]]
+    return found & (cell == UNKNOWN)
+
+
+def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
+    """More than ``lost_fraction`` of the valid beams disagree with the map (counted before the
+    run filter): the pose is probably wrong, so the scan is dropped. A beam that is a change
+    because it looks into unknown space says nothing of the pose (docs/algorithm.md, a partly
+    mapped place), so such a scan is dropped only if the beams whose expected ray ends in
+    known space are changes past ``lost_fraction`` too. (Never more scans than the paper's
+    rule: that is asked first, and costs nothing.)"""
+    if not (beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid):
+        return False
+    known = ~ends_in_unknown(ref, beams.own_expected, beams.own_direction, beams.own_found)
+    known &= ~np.isnan(beams.ranges)
+    n_known = int(np.count_nonzero(known))
+    return n_known > 0 and np.count_nonzero(known & beams.change) > cfg.lost_fraction * n_known
+
+
+# --- not in the paper: the seen-surface guard -------------------------------------------------
+def guard_seen_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+                        marks: np.ndarray, enclosed: np.ndarray, ws: Workspace) -> int:
+    """Mark in ``marks`` (the changed-flag marks, so the removed-obstacle walk passes them by)
+    the cells of M within ``seen_surface_radius`` of the hit point of any valid beam that are
+    occupied, or unknown outside the ``enclosed`` regions: surfaces this scan sees. Under a
+    pose error below a cell the rays that graze an object's corner cross its outline cells
+    while the beams that hit the object say it is still there (docs/choices.md). Only scans
+    with detected changes need it. Returns the count marked, for ``release_seen_surfaces``."""
+    radius = cfg.seen_surface_radius / res
+    if radius <= 0 or not (beams.changes or cfg.grow_into_unknown):
+        return 0
+    side = 2 * int(math.ceil(radius)) + 1
+    ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size))
+    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict, radius=radius,
+                                        unknown_radius=unknown_guard(cfg, res), marks=marks,
+                                        out=ws.protected)
+
+
+def unknown_guard(cfg: UpdaterConfig, res: float) -> float:
+    """The seen-surface guard's radius [grid units] for open unknown cells: the whole radius
+    with the paper's rules; growing into the unknown, one cell at most. There the cells a scan
+    hits keep out of its walks anyway (``list_unknown_hits``), and a guard of 1.5 cells kept
+    the free space from ever reaching a wall M had not seen (on the Intel log more of the
+    well-observed cells stayed unknown than with one cell); none at all let rays grazing a
+    rack's corner that M had as unknown free it under 5 cm of pose error."""
+    radius = cfg.seen_surface_radius / res
+    return min(radius, 1.0) if cfg.grow_into_unknown else radius
+
+
+def release_seen_surfaces(marks: np.ndarray, n_guarded: int, ws: Workspace) -> None:
+    """Clear the marks ``guard_seen_surfaces`` set, and only those."""
+    if n_guarded:
+        kernels().clear_bits(marks, ws.protected, n_guarded)
+
+
+# --- 2. changed-cells evaluator ---------------------------------------------------------------
+def flag_changed_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                       ws: Workspace) -> tuple[int, int]:
+    """Changed flags of the detected-change beams into ``ws.changed``, each cell once
+    (``marks``). New obstacles: the hit cell, if every cell of M within tol(r_i) is free.
+    Removed obstacles: the occupied or unknown cells from the sensor to p_th, short of the hit
+    by the skip, all but the last (cells marked already, as ``guard_seen_surfaces`` marks
+    them, get none). Returns (cells flagged, new-obstacle flags)."""
+    k = kernels()
+    reach = 1.0 - beams.skip / beams.ranges     # p_th as a fraction of the way to the hit
+    n = k.flag_removed_obstacles(ref, beams.sensor, beams.hits, reach=reach,
+                                 verdict=beams.verdict, marks=marks, cells=ws.cells,
+                                 out=ws.changed)
+    n_all = k.flag_new_obstacles(ref, beams.hits, tol=beams.tol, verdict=beams.verdict,
+                                 marks=marks, out=ws.changed, n=n)
+    return n_all, n_all - n
+
+
+# --- not in the paper: fill_gaps --------------------------------------------------------------
+def fill_gaps(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+              marks: np.ndarray, ws: Workspace, n: int) -> tuple[int, int]:
+    """With ``cfg.fill_gaps``: a hit that pairs with M but lands in a cell with nothing of M
+    within ``fill_gaps_clearance`` also gets a changed flag, appended to ``ws.changed`` after
+    the first n (each cell once, ``marks``). The pairing distance D(r) otherwise hides the gaps
+    of a face that an earlier session mapped only in pieces (docs/choices.md, "fill_gaps").
+
+    The free walk of an agreeing beam then reaches to ``fill_gaps_free_margin`` short of the
+    hit where that is further than ``free_fraction`` of its range (beyond 3.75 m at the
+    defaults): a free cell two cells in front of a face, which noisy hits sometimes reach, then
+    also gets the unchanged flags of the beams that pass it, so this rule draws it only from
+    hits that land there consistently. Returns (cells flagged in all, flagged here)."""
+    if not cfg.fill_gaps:
+        return n, 0
+    clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
+    n_all = kernels().flag_gaps(ref, beams.hits, beams.verdict, clearance=clearance, marks=marks,
+                                out=ws.changed, n=n)
+    margin = cfg.fill_gaps_free_margin
+    if margin > 0:
+        longer = margin < beams.ranges
+        beams.free_reach[longer] = np.maximum(beams.free_reach[longer],
+                                              1.0 - margin / beams.ranges[longer])
+    return n_all, n_all - n
+
+
+# --- 3. unchanged-cells evaluator -------------------------------------------------------------
+def flag_unchanged_cells(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                         ws: Workspace) -> int:
+    """Unchanged flags of the beams the classifier left UNCHANGED into ``ws.unchanged`` (each
+    cell once, ``marks``).
+
+    Occupied cells: the code's variant, every occupied-or-unknown cell among the hit cell c(p_i)
+    and its 4-neighbours, rather than the paper's (c(p_i) if occupied, else its occupied
+    neighbours). With 2 cm of pose noise a hit at a wall lands sometimes just in front of the
+    surface and sometimes just inside it; the code's set changes less between these two cases
+    than the paper's (one cell when inside, up to three when in front), so a wall cell's buffer
+    collects its unchanged flags steadily, which is what protects walls against the stray
+    changed flags of grazing beams. Unknown counts as occupied here, as everywhere in detection.
+
+    Free cells: every free cell on the beam up to ``beams.free_reach`` of the way to the hit
+    (``free_fraction``, or further with ``fill_gaps``). Returns the count of cells flagged."""
+    k = kernels()
+    n = k.flag_free_unchanged(ref, beams.sensor, beams.hits, reach=beams.free_reach,
+                              verdict=beams.verdict, marks=marks, cells=ws.cells,
+                              out=ws.unchanged)
+    return k.flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks, ws.unchanged, n)
+
+
+def flag_unchanged_surfaces(ref: np.ndarray, beams: Beams, marks: np.ndarray,
+                            ws: Workspace) -> int:
+    """The occupied half of ``flag_unchanged_cells`` alone: the occupied-or-unknown cells of M
+    among the hit cell and its 4-neighbours of each UNCHANGED beam. Returns the count."""
+    return kernels().flag_occupied_unchanged(ref, beams.hits, beams.verdict, marks,
+                                             ws.unchanged, 0)
+
+
+# --- not in the paper: hits confirm M's surfaces ---------------------------------------------
+def flag_hit_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, marks: np.ndarray,
+                      ws: Workspace, n: int) -> int:
+    """With ``cfg.confirm_hit_surfaces``: unchanged flags, after the first n of
+    ``ws.unchanged`` (each cell once, ``marks``), for the occupied cells of M among the hit
+    cell and its 4-neighbours (the set the unchanged-cells evaluator uses) of every detected
+    change and every beam within ``n_skip`` of one whose hit lands in a cell that M does not
+    have as free.
+
+    The unchanged-cells evaluator hears only the beams that agree with M, so a cell of M
+    that the scans hit while their beams count as changes gets no unchanged flag from them.
+    Where M is unknown around the robot (a place an earlier session saw only from afar) every
+    beam is a change, as no virtual beam gets past the unknown cells: the removed-obstacle
+    walks of the scans that look past an occupied cell of M fill its buffer, the unknown
+    cells around it, seen through, lend it their support in the decision, and the later scans
+    that hit it, the session's own evidence that it is there, cannot empty its buffer again.
+    A hit in an occupied or unknown cell of M is such evidence whatever the classifier made of
+    the beam. A hit in a free cell of M is not: it pairs with nothing of M, so it may be a new
+    object, or noise in front of a face that stood behind a removed object, whose remnants
+    beside it should still go (flagging the 4-neighbours of such hits kept a removed object's
+    cell in the simulated W2).
+
+    In the main job of the simulated warehouse it changes nothing in W2 and W3 and removes a
+    few false changes of W4; in the soak sessions, each run with and without it on the same
+    M(i-1), the few cells that differ are mostly remnants of removed objects that some beam
+    hit, next to remnants both runs keep; on the Killian Court log (a map of its first third
+    updated with its last third) it keeps the cells occupied in both thirds' maps that the
+    update used to free (figures: docs/choices.md and benchmarks/RESULTS.md). Returns the new
+    count."""
+    if not (cfg.confirm_hit_surfaces and beams.changes):
+        return n    # no change, so no beam the rule is for
+    return int(kernels().flag_hit_surfaces(ref, beams.hits, beams.verdict, marks,
+                                           ws.unchanged, n))
+
+
+# --- not in the paper: growth into the unknown ------------------------------------------------
+def list_unknown_hits(ref: np.ndarray, beams: Beams, enclosed: np.ndarray, hit_marks: np.ndarray,
+                      ch_marks: np.ndarray, ws: Workspace) -> int:
+    """The hit cells of the scan's valid beams that lie in open unknown space of M (unknown,
+    outside the enclosed regions) into ``ws.hits_unknown``, kept from the scan's walks (their
+    changed-flag marks set until ``release_unknown_hits``). Returns the count."""
+    ws.for_unknown_hits(beams.hits.shape[0])
+    return int(kernels().list_unknown_hits(ref, enclosed, beams.hits, beams.verdict,
+                                           hit_marks=hit_marks, ch_marks=ch_marks,
+                                           out=ws.hits_unknown))
+
+
+def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarray,
+                              cfg: UpdaterConfig, res: float, marks: np.ndarray, ws: Workspace,
+                              n: int) -> int:
+    """Changed flags, after the first n of ``ws.changed``, for the open unknown cells that the
+    beams looking into unknown space (their expected ray ends at an unknown cell) see through,
+    up to ``seen_surface_radius`` (at least a cell) short of the hit. The paper's walk frees
+    unknown cells too, but only for detected changes and max(2 %, 0.15 m) short of the hit, so
+    as not to free a surface a noisy hit stands for; in space M never saw, an agreeing beam
+    shows it empty as well, and the hit cells themselves are kept from the walks. Beams whose
+    expected ray ends in known space are left out: under a pose error below a cell they graze
+    the corners M had as unknown. Returns the new count."""
+    into = ends_in_unknown(ref, beams.own_expected, beams.own_direction, beams.own_found)
+    into &= ~np.isnan(beams.ranges)
+    short = max(cfg.seen_surface_radius, res)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        reach = np.where(beams.ranges > short, 1.0 - short / beams.ranges, 0.0)
+    return int(kernels().flag_open_unknown_walks(ref, enclosed, beams.sensor, beams.hits,
+                                                 reach=reach, into_unknown=into, marks=marks,
+                                                 cells=ws.cells, out=ws.changed, n=n))
+
+
+def release_unknown_hits(ch_marks: np.ndarray, un_marks: np.ndarray, n_hits: int,
+                         ws: Workspace, n_un: int) -> int:
+    """Clear the changed-flag marks ``list_unknown_hits`` set, and give each hit cell an
+    unchanged flag after the first n_un of ``ws.unchanged`` (a hit says the cell is not free).
+    Returns the new count of unchanged flags."""
+    cells = ws.hits_unknown[:n_hits]
+    kernels().clear_bits(ch_marks, cells, n_hits)
+    return int(kernels().flag_listed_unchanged(cells, un_marks, ws.unchanged, n_un))
+
+
+def push_hits(hitbuf_flat: np.ndarray, ref: np.ndarray, enclosed: np.ndarray, n_hits: int,
+              n_changed: int, cfg: UpdaterConfig, hit_marks: np.ndarray, drawn: np.ndarray,
+              ws: Workspace) -> int:
+    """The hit buffers of open unknown cells, N_b flags as the change buffers: 1 for a scan
+    that hit the cell, 0 for one that saw through it. A cell hit in T of its last N_b
+    observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
+    many) is drawn: occupied in the output. Returns the change of the drawn count."""
+    return int(kernels().push_hits(hitbuf_flat, ref.reshape(-1), enclosed,
+                                   hit_cells=ws.hits_unknown[:n_hits],
+                                   changed=ws.changed[:n_changed], mask=buffer_mask(cfg),
+                                   threshold=cfg.threshold, few=cfg.unanimous_min,
+                                   hit_marks=hit_marks, drawn=drawn))
+
+
+# --- buffers and decision ---------------------------------------------------------------------
+def buffer_mask(cfg: UpdaterConfig) -> int:
+    return (1 << cfg.buffer_size) - 1
+
+
+def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+               n_changed: int, n_unchanged: int, cfg: UpdaterConfig, ch_marks: np.ndarray,
+               un_marks: np.ndarray, ws: Workspace) -> int:
+    """Shift the scan's flags into the cells' buffers, changed flags first:
+    ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``, and count them in ``seen_flat`` (flags
+    a cell ever got, saturating at 255). Only flagged cells are touched. Returns the count of
+    entries written to ``ws.moved`` (cells whose decision inputs changed)."""
+    ws.for_moved(n_changed + n_unchanged)
+    return kernels().push_flags(hist_flat, seen_flat, ref_flat, changed=ws.changed[:n_changed],
+                                unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg),
+                                threshold=cfg.threshold, few=cfg.unanimous_min,
+                                ch_marks=ch_marks, un_marks=un_marks, out_moved=ws.moved)
+
+
+def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+           decided: np.ndarray, n_moved: int, width: int, cfg: UpdaterConfig,
+           ws: Workspace) -> int:
+    """The decision rule (n_c >= T; or, with ``unanimous_min``, every flag of a cell observed
+    fewer than T times says changed; or n_c plus the 8-neighbours of the same state in M with
+    n >= T reaches T) for the cells whose inputs changed this scan. Returns the change of the
+    number of changed cells."""
+    return kernels().decide(hist_flat, seen_flat, ref_flat, decided, moved=ws.moved[:n_moved],
+                            width=width, mask=buffer_mask(cfg), threshold=cfg.threshold,
+                            few=cfg.unanimous_min, support=cfg.neighbour_support)
+
+
+def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,
+               cfg: UpdaterConfig) -> tuple[np.ndarray, int]:
+    """The decision rule over the whole map: (decided bits, count of changed cells)."""
+    decided = np.zeros((ref_flat.size + 7) // 8, np.uint8)
+    count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width=width,
+                                 mask=buffer_mask(cfg), threshold=cfg.threshold,
+                                 few=cfg.unanimous_min, support=cfg.neighbour_support)
+    return decided, int(count)
+
+
+# --- output and last check --------------------------------------------------------------------
+def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
+                   last_check: bool, drawn: np.ndarray | None = None,
+                   seen_through: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """The output cells: M with the changed cells flipped (free <-> occupied, unknown seen
+    through -> free) and, with ``last_check``, the outline of removed objects closed: each
+    8-neighbour of a cell that became free that lies in an enclosed unknown region of M and is
+    still unknown becomes occupied. The ``drawn`` cells (open unknown space hit often enough)
+    become occupied. With ``seen_through`` (the buffers), a cell that holds a changed flag is
+    not closed. Returns (cells, count closed by the last check)."""
+    out = ref.copy()
+    hist = np.zeros(0, np.uint16) if seen_through is None else seen_through.reshape(-1)
+    closed = kernels().apply_changes(ref.reshape(-1), decided, enclosed, width=ref.shape[1],
+                                     close=last_check, hist=hist, out=out.reshape(-1))
+    if drawn is not None:
+        kernels().apply_drawn(drawn, out.reshape(-1))
+    return out, int(closed)
+
+
+def enclosed_unknown(ref: np.ndarray, max_cells: int) -> tuple[np.ndarray, int]:
+    """Bits of the cells of the enclosed unknown regions of M: 8-connected unknown regions that
+    touch no map border and have at most ``max_cells`` cells (objects' interiors). Two unknown
+    cells that touch only at a corner belong to one region, so a region counts as enclosed only
+    if it is sealed against diagonal leaks too. Returns (bits, cells marked)."""
+    k = kernels()
+    n = k.unknown_runs(ref, np.zeros((0, 3), np.int32))
+    runs = np.zeros((n, 3), np.int32)          # row, first col, last col
+    k.unknown_runs(ref, runs)
+    parent = np.zeros(n, np.int32)
+    k.link_runs(runs, parent)
+    bits = np.zeros((ref.size + 7) // 8, np.uint8)
+    marked = k.mark_enclosed(runs, parent, ref.shape[0], ref.shape[1], max_cells, bits)
+    return bits, int(marked)

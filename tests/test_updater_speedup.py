@@ -1,0 +1,291 @@
+"""The updater's faster kernels flag exactly what the plain forms did.
+
+The walks that flag cells as they go (``walk_beams``), the decision that decides each cell
+once (``decide``), the classifier's two calls (``prepare_beams``, ``classify_scan``) and the
+walks into unknown space are each checked against a plain Python reference written here, on
+seeded random input. Then the whole updater runs on random scans in a synthetic room (with
+the paper's configuration and with ``mapupdate update``'s) beside the code before the change,
+kept in ``benchmarks/updater_before``: every report, every buffer and the output map must be
+the same, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gridmap import FREE, OCCUPIED, UNKNOWN
+from updater import MapUpdater, UpdaterConfig, steps
+from updater import _kernels as K
+
+try:
+    import synthetic_room as world
+except ImportError:  # tests collected as a package
+    from tests import synthetic_room as world
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
+
+
+# --- plain references -------------------------------------------------------------------------
+def plain_cells(x0, y0, x1, y1, height, width):
+    """The cells (row, col) of the grid that the segment passes through, in the order it enters
+    them: those it crosses with positive length (every cell's entry and exit parameters,
+    sorted), and where it passes exactly through a corner, the cell beside the corner in x (the
+    walks are 4-connected)."""
+    cells = []
+    for row, col in crossed_cells(x0, y0, x1, y1, height, width):
+        if cells and cells[-1][0] != row and cells[-1][1] != col:
+            cells.append((cells[-1][0], col))
+        cells.append((row, col))
+    return cells
+
+
+def crossed_cells(x0, y0, x1, y1, height, width):
+    """The cells the segment crosses with positive length (and the one it starts in), in the
+    order it enters them."""
+    entered = []
+    rows = range(max(math.floor(min(y0, y1)), 0), min(math.floor(max(y0, y1)), height - 1) + 1)
+    cols = range(max(math.floor(min(x0, x1)), 0), min(math.floor(max(x0, x1)), width - 1) + 1)
+    for row in rows:
+        for col in cols:
+            lo, hi = 0.0, 1.0
+            for start, d, a, b in ((x0, x1 - x0, col, col + 1), (y0, y1 - y0, row, row + 1)):
+                if d == 0.0:
+                    lo, hi = (lo, hi) if a <= start < b else (1.0, 0.0)
+                else:
+                    ta, tb = (a - start) / d, (b - start) / d
+                    lo, hi = max(lo, min(ta, tb)), min(hi, max(ta, tb))
+            inside = col <= x0 < col + 1 and row <= y0 < row + 1
+            if hi - lo > 1e-9 or (inside and hi >= lo):
+                entered.append((lo, not inside, row, col))     # the start cell first
+    return [(row, col) for _, _, row, col in sorted(entered)]
+
+
+def plain_walks(data, enclosed, sensor, hits, reach, chosen, drop_last, kind):
+    """The flags of the walks of the ``chosen`` beams: each beam's cells from the sensor to
+    ``reach`` of the way to its hit (without the end point's cell with ``drop_last``), those
+    of ``kind``, each cell once, in the order first flagged."""
+    height, width = data.shape
+    flagged = {}
+    for i in np.flatnonzero(chosen):
+        if not reach[i] > 0:
+            continue
+        tx = sensor[0] + reach[i] * (hits[i, 0] - sensor[0])
+        ty = sensor[1] + reach[i] * (hits[i, 1] - sensor[1])
+        cells = plain_cells(sensor[0], sensor[1], tx, ty, height, width)
+        if drop_last and 0 <= tx < width and 0 <= ty < height:
+            cells = cells[:-1]
+        for row, col in cells:
+            v = int(data[row, col])
+            wanted = {K.WALK_FREE: v == FREE, K.WALK_BLOCKED: v != FREE,
+                      K.WALK_OPEN_UNKNOWN: v == UNKNOWN and not enclosed[row, col]}[kind]
+            if wanted:
+                flagged.setdefault(row * width + col)
+    return list(flagged)
+
+
+def random_map(rng, height=45, width=55):
+    data = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], np.int8), (height, width),
+                      p=[0.8, 0.1, 0.1])
+    return data, rng.random((height, width)) < 0.3
+
+
+def random_beams(rng, data, n=120):
+    height, width = data.shape
+    sensor = np.array([rng.uniform(5, width - 5), rng.uniform(5, height - 5), 0.0])
+    a = rng.uniform(-math.pi, math.pi, n)
+    r = rng.uniform(0.2, 40, n)
+    hits = np.c_[sensor[0] + r * np.cos(a), sensor[1] + r * np.sin(a)]
+    # some beams straight along an axis or diagonal, from a sensor on a cell corner
+    if rng.random() < 0.5:
+        sensor[:2] = np.floor(sensor[:2])
+        hits[:8] = sensor[:2] + np.array([[5, 0], [0, 5], [-5, 0], [0, -5], [5, 5], [-5, 5],
+                                          [5, -5], [-5, -5]], float) * rng.uniform(0.5, 4)
+    return sensor, hits
+
+
+# --- kernels against the references -----------------------------------------------------------
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("kind", [K.WALK_FREE, K.WALK_BLOCKED, K.WALK_OPEN_UNKNOWN])
+def test_fused_walks_flag_the_cells_of_the_plain_walks_in_order(seed, kind):
+    rng = np.random.default_rng(seed)
+    data, enclosed = random_map(rng)
+    sensor, hits = random_beams(rng, data)
+    reach = rng.uniform(-0.2, 1.0, len(hits))
+    select = rng.random(len(hits)) < 0.7
+    drop_last = bool(seed % 2)
+    enclosed_bits = np.packbits(enclosed.reshape(-1), bitorder="little")
+    marks = np.zeros_like(enclosed_bits)
+    out = np.zeros(data.size + 1, np.int32)
+    n = K.walk_beams(data, enclosed_bits, sensor, hits, reach, select=select, want=True,
+                     drop_last=drop_last, cap=1000, kind=kind, marks=marks, out=out, n=0)
+    expect = plain_walks(data, enclosed, sensor, hits, reach, select, drop_last, kind)
+    assert out[:n].tolist() == expect and n > 20
+    assert np.flatnonzero(np.unpackbits(marks, bitorder="little")).tolist() == sorted(expect)
+
+
+def test_a_walk_stops_at_the_cap_as_the_listed_walk_does():
+    data = np.zeros((20, 200), np.int8)
+    sensor, hits = np.array([1.5, 10.5, 0.0]), np.array([[190.5, 10.5]])
+    out = np.zeros(data.size + 1, np.int32)
+    marks = np.zeros((data.size + 7) // 8, np.uint8)
+    n = K.walk_beams(data, marks, sensor, hits, np.ones(1), select=np.ones(1, np.bool_),
+                     want=True, drop_last=False, cap=25, kind=K.WALK_FREE, marks=marks, out=out,
+                     n=0)
+    assert out[:n].tolist() == [10 * 200 + c for c in range(1, 26)]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_walks_into_unknown_space_match_the_plain_rule(seed):
+    rng = np.random.default_rng(20 + seed)
+    data, enclosed = random_map(rng)
+    sensor, hits = random_beams(rng, data)
+    ranges = np.hypot(*(hits - sensor[:2]).T) * 0.05
+    ranges[::9] = np.nan
+    expected = sensor[:2] + (hits - sensor[:2]) * rng.uniform(0.3, 1.2, (len(hits), 1))
+    directions = (hits - sensor[:2]) / np.hypot(*(hits - sensor[:2]).T)[:, None]
+    found = rng.random(len(hits)) < 0.8
+    short = 0.075
+    # the plain rule: the expected ray ends at an unknown cell, the beam is valid and longer
+    # than ``short``, and walks to ``short`` short of its hit
+    into = np.zeros(len(hits), bool)
+    for i in range(len(hits)):
+        col, row = (math.floor(v) for v in expected[i] + 1e-4 * directions[i])
+        on_map = 0 <= row < data.shape[0] and 0 <= col < data.shape[1]
+        into[i] = found[i] and (not on_map or data[row, col] == UNKNOWN) and ranges[i] > short
+    reach = np.where(into, 1.0 - short / np.where(into, ranges, 1.0), 0.0)
+    expect = plain_walks(data, enclosed, sensor, hits, reach, into, True, K.WALK_OPEN_UNKNOWN)
+    bits = np.packbits(enclosed.reshape(-1), bitorder="little")
+    marks = np.zeros_like(bits)
+    out = np.zeros(data.size + 1, np.int32)
+    n = K.flag_unknown_seen_through(data, bits, sensor, hits, ranges, expected, directions,
+                                    found, short=short, marks=marks, cap=1000,
+                                    into=np.zeros(len(hits), np.bool_),
+                                    reach=np.zeros(len(hits)), out=out, n=0)
+    assert out[:n].tolist() == expect and n > 0
+
+
+@pytest.mark.parametrize("few, support", [(0, True), (3, True), (3, False), (0, False)])
+def test_decide_decides_each_cell_once_and_leaves_the_stamps_clear(few, support):
+    rng = np.random.default_rng(7)
+    size, width = 40 * 30, 30
+    ref = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], np.int8), size)
+    hist = rng.integers(0, 1 << 10, size).astype(np.uint16)
+    hist[rng.random(size) < 0.5] = 0
+    seen = rng.integers(0, 12, size).astype(np.uint8)
+    moved = rng.integers(0, size, 300).astype(np.int32)
+    moved[::3] = -1 - moved[::3]            # crossed the threshold: the neighbours too
+    stamp = np.zeros((size + 7) // 8, np.uint8)
+    decided = np.zeros_like(stamp)
+    delta = K.decide(hist, seen, ref, decided, moved, width, 0x3FF, 7, few, support, stamp)
+    assert not stamp.any()
+    # the plain rule over every cell the entries name, and nothing else
+    named = set()
+    for m in moved.tolist():
+        idx = m if m >= 0 else -1 - m
+        row, col = divmod(idx, width)
+        near = [(r, c) for r in (row - 1, row, row + 1) for c in (col - 1, col, col + 1)
+                if 0 <= r < size // width and 0 <= c < width] if m < 0 and (few or support) \
+            else [(row, col)]
+        named |= {r * width + c for r, c in near}
+    expect = np.zeros(size, bool)
+    for idx in named:
+        expect[idx] = plain_changed(hist, seen, ref, idx, width, few, support)
+    got = np.unpackbits(decided, bitorder="little")[:size].astype(bool)
+    assert (got == expect).all() and delta == expect.sum() > 0
+
+
+def plain_changed(hist, seen, ref, idx, width, few, support, threshold=7, window=10):
+    """docs/algorithm.md's decision rule for one cell, written out."""
+    def count(j):
+        return bin(int(hist[j]) & ((1 << window) - 1)).count("1")
+
+    def neighbours():
+        row, col = divmod(idx, width)
+        return [r * width + c for r in (row - 1, row, row + 1) for c in (col - 1, col, col + 1)
+                if 0 <= r < len(ref) // width and 0 <= c < width and r * width + c != idx]
+
+    n = count(idx)
+    if n >= threshold:
+        return True
+    if few and few <= n == seen[idx] < threshold:
+        if ref[idx] != OCCUPIED or not any(
+                ref[j] == OCCUPIED and seen[j] and count(j) < min(int(seen[j]), window)
+                for j in neighbours()):
+            return True
+    if support:
+        same = [j for j in neighbours() if (ref[j] != FREE) == (ref[idx] != FREE)]
+        return n + sum(count(j) >= threshold for j in same) >= threshold
+    return False
+
+
+def test_per_beam_distances_are_the_configuration_s_to_the_bit():
+    cfg = UpdaterConfig(pairing_distance_slope=0.021, radius_far_range=7.3)
+    rng = np.random.default_rng(3)
+    r = np.r_[rng.uniform(0, 25, 500), np.nan, 0.2, 10.0, 7.3]
+    ws = steps.Workspace()
+    ws.for_beams(len(r), len(r), 10)
+    K.beam_distances(r, 0.05, ws.distances(cfg), ws.pairing, ws.tol, ws.skip, ws.reach,
+                     ws.free_reach)
+    pairing, tol, skip = steps.beam_distances(r, 0.05, cfg)
+    for got, want in ((ws.pairing, pairing), (ws.tol, tol), (ws.skip, skip),
+                      (ws.reach, 1.0 - skip / r), (ws.free_reach, np.full(len(r), 0.98))):
+        assert np.array_equal(got, want, equal_nan=True)
+
+
+# --- the whole updater, before and after ------------------------------------------------------
+def room_session(seconds, seed):
+    """A map of the room with one box, a world with that box moved and a new one: scans from
+    a circling robot with noisy poses (some beams lost)."""
+    shapes_map = world.room_walls() + [world.Rect(4.0, 4.0, 5.0, 4.6), world.Circle(8, 3, 0.4)]
+    shapes_now = world.room_walls() + [world.Rect(5.2, 6.4, 6.2, 7.0), world.Circle(8, 3, 0.4),
+                                       world.Rect(2.0, 8.0, 2.6, 8.6)]
+    ref = world.rasterise(world.room_walls() + [world.Circle(8, 3, 0.4)],
+                          hollow=[world.Rect(4.0, 4.0, 5.0, 4.6)])
+    rng = np.random.default_rng(seed)
+    drive = world.Drive(seconds=seconds, seed=seed, radius=rng.uniform(2.0, 3.5))
+    scans = []
+    for true, noisy, t in drive.steps():
+        scan = world.full_scan(shapes_now, true, t, beams=int(rng.choice([360, 720])))
+        scan.ranges[rng.random(scan.beams) < 0.03] = np.nan
+        scans.append((scan, noisy, true))
+    return ref, scans, shapes_map
+
+
+def unknown_corner(ref):
+    """The map with its top right quarter unknown: space to grow into."""
+    data = ref.data.copy()
+    h, w = data.shape
+    data[h // 2:, w // 2:] = UNKNOWN
+    return type(ref)(data, ref.resolution, ref.origin)
+
+
+@pytest.mark.parametrize("seed, robot", [(0, False), (1, True), (2, True), (3, False)])
+def test_the_updater_gives_what_it_gave_before_to_the_bit(seed, robot):
+    ref, scans, _ = room_session(14.0, seed)
+    cfg = UpdaterConfig(gating=False)
+    if robot:     # mapupdate update's additions: growth into the unknown, the unanimous rule
+        ref = unknown_corner(ref)
+        cfg = UpdaterConfig(grow_into_unknown=True, unanimous_min=3, gate_confirm=True,
+                            gate_min_interval=0.0, gate_min_distance=0.2,
+                            gate_min_rotation_deg=20.0, fill_gaps=seed == 2,
+                            virtual_to_measured_ratio=1 + seed % 2)
+    after, before = MapUpdater(ref, cfg), BeforeMapUpdater(ref, cfg)
+    for scan, noisy, true in scans:
+        a = after.process(scan, noisy, odometry=true)
+        b = before.process(scan, noisy, odometry=true)
+        assert a.summary() == b.summary()
+        assert (a.verdicts is None and b.verdicts is None) or \
+            np.array_equal(a.verdicts, b.verdicts)
+    assert np.array_equal(after.updated_map().data, before.updated_map().data)
+    assert np.array_equal(after._hist, before._hist)
+    assert np.array_equal(after._hitbuf, before._hitbuf)
+    assert np.array_equal(after._seen, before._seen)
+    assert after.stats == before.stats and after.n_changed == before.n_changed > 0
+    # the scan marks are all clear between scans
+    assert not after._ch_marks.any() and not after._un_marks.any()

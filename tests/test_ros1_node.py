@@ -342,3 +342,34 @@ def test_without_a_ros_master_the_node_says_so_in_one_line(bags, tmp_path):
     assert p.stderr.splitlines() == [f"mapupdate ros1: error: no ROS master answers at "
                                      f"{env['ROS_MASTER_URI']}: start one (roscore) or set "
                                      "ROS_MASTER_URI"]
+
+
+def test_a_scan_worker_that_stops_anyway_is_an_error_on_diagnostics(ros):
+    """Whatever one scan raises is counted and skipped; should the worker itself end (a fault
+    outside any scan), /diagnostics says so at level ERROR, never "ok"."""
+    from types import SimpleNamespace
+
+    import rospy
+
+    from robot.ros1.node import MapUpdaterNode
+    from robot.ros_common.settings import node_settings
+
+    node = MapUpdaterNode(*node_settings({}))
+
+    class BrokenQueue:
+        def __len__(self):
+            return 1
+
+        def pop(self):
+            raise RuntimeError("queue broken")
+
+    node._queue = BrokenQueue()
+    with pytest.raises(RuntimeError):
+        node._work()
+    sent = []
+    node.diag_pub = SimpleNamespace(publish=sent.append)
+    rospy.rostime.set_rostime_initialized(True)      # (no node is initialised here)
+    node._diagnostics({})
+    status = sent[0].status[0]
+    assert status.level == status.ERROR
+    assert status.message == "the scan worker stopped (RuntimeError: queue broken)"

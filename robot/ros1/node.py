@@ -77,6 +77,7 @@ class MapUpdaterNode:
         self.pipeline = None
         self._lock = threading.Lock()            # the pipeline, the published map
         self._queue = ScanQueue(settings.queue_size)
+        self._worker_stopped = ""                # why the scan worker ended, if it did
         self._wake = threading.Condition()
         self._published: np.ndarray | None = None
         if reference is not None:
@@ -132,6 +133,17 @@ class MapUpdaterNode:
             self._wake.notify()
 
     def _work(self) -> None:
+        """The scan worker; should it ever end before the node does, ``/diagnostics`` says
+        so at level ERROR with the reason (``_worker_stopped``)."""
+        try:
+            self._work_loop()
+        except BaseException as e:
+            self._worker_stopped = f"{type(e).__name__}: {e}"
+            raise
+        if not self.ros["rospy"].is_shutdown():
+            self._worker_stopped = "it returned"
+
+    def _work_loop(self) -> None:
         rospy = self.ros["rospy"]
         while not rospy.is_shutdown():
             with self._wake:
@@ -264,6 +276,9 @@ class MapUpdaterNode:
         worrying = self.health.counts["scans_dropped_behind"] or sum(self.health.skipped.values())
         status.level = status.WARN if worrying else status.OK
         status.message = "scans dropped or skipped" if worrying else "ok"
+        if self._worker_stopped:                 # nothing is processed any more: never "ok"
+            status.level = status.ERROR
+            status.message = f"the scan worker stopped ({self._worker_stopped})"
         status.values = [r["KeyValue"](k, v) for k, v in self.health.values(counts)]
         array = r["DiagnosticArray"]()
         array.header.stamp = r["rospy"].Time.now()

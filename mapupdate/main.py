@@ -89,6 +89,23 @@ def _add_run(sub) -> None:
                      help="commit each session's map as a version of this map store (made if "
                           "absent; docs/map_store.md)")
     run.set_defaults(command_at=("testbed_commands", "run"))
+    fleet = sub.add_parser("fleet", help="several robots update one map in the simulated "
+                                         "warehouse (docs/fleet.md)")
+    fleet.add_argument("--scenario", default=None, help="built-in name or scenario file")
+    fleet.add_argument("--robots", type=int, default=2, help="1..8 (default 2)")
+    fleet.add_argument("--mode", choices=("shared", "per-robot"), default="shared",
+                       help="one updater fed every robot's scans in time order (default), or "
+                            "one per robot merged at the session's end")
+    fleet.add_argument("--merge", choices=("vote", "union"), default="vote",
+                       help="merge rule of the per-robot mode (default vote)")
+    fleet.add_argument("--sessions", type=int, default=None, help="W1 and this many minus one")
+    fleet.add_argument("--quick", action="store_true", help="the short routes")
+    fleet.add_argument("--seed", type=int, default=None)
+    fleet.add_argument("--out", type=Path, default=None, help="folder for fleet.json and maps")
+    fleet.add_argument("--unmasked", action="store_true",
+                       help="give the updater the other robots' returns too")
+    fleet.add_argument("--no-progress", action="store_true", help="no progress line")
+    fleet.set_defaults(command_at=("testbed_commands", "fleet"))
 
 
 def _add_compare(sub) -> None:

@@ -134,6 +134,24 @@ def rerun_recorder(args):
     return RerunRecorder(args.rerun, spawn=spawn) if args.rerun or spawn else None
 
 
+def fleet(args) -> int:
+    require("pymunk")
+    from scenarios.fleet import FleetOptions, format_table, run_fleet
+    from scenarios.options import RunError
+
+    options = FleetOptions(robots=args.robots, mode=args.mode, merge_rule=args.merge,
+                           quick=args.quick, sessions=args.sessions, seed=args.seed,
+                           mask_robots=not args.unmasked, progress=not args.no_progress)
+    try:
+        record = run_fleet(args.scenario, options, args.out)
+    except ValueError as e:             # the fleet's own checks name the option
+        raise RunError(str(e)) from None
+    print(format_table(record["sessions"]))
+    if args.out is not None:
+        print(f"wrote {args.out}/fleet.json")
+    return 0
+
+
 def generate(args) -> int:
     require("pymunk")
     out = Path(args.out)

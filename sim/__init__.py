@@ -12,6 +12,12 @@ or, to drive the robot by command instead of along its route:
 
     world = World(scenario, "W2", seed=7)
     msgs = world.step(0.4, 0.1)      # hold v [m/s], w [rad/s] for a physics step
+
+or several robots, each a moving obstacle in the others' scans (``sim.fleet``):
+
+    fleet = FleetWorld(scenario, "W2", [FleetMember(start, route), ...], seed=7)
+    for robot, msg in fleet.run():   # each robot's messages, all in time order
+        ...
 """
 
 from .groundtruth import grid_frame
@@ -20,7 +26,8 @@ from .scenario import (Change, LidarSpec, Obstacle, PersonSpec, RobotSpec, Scena
                        ScenarioError, SessionSpec, WorldSpec, load_scenario, quick_variant,
                        scenario_from_dict)
 from .world import OdometryMsg, ScanMsg, World
+from .fleet import FleetMember, FleetWorld
 
-__all__ = ["Change", "LidarSpec", "Obstacle", "OdometryMsg", "PersonSpec", "RobotSpec",
-           "ScanMsg", "Scenario", "ScenarioError", "SessionSpec", "World", "WorldSpec",
+__all__ = ["Change", "FleetMember", "FleetWorld", "LidarSpec", "Obstacle", "OdometryMsg",
+           "PersonSpec", "RobotSpec", "ScanMsg", "Scenario", "ScenarioError", "SessionSpec", "World", "WorldSpec",
            "grid_frame", "load_scenario", "quick_variant", "render_world", "scenario_from_dict"]

@@ -343,9 +343,30 @@ def memory_child(scans_count: int) -> None:
     updater = MapUpdater(reference(2000), UpdaterConfig(gating=False))
     for scan, pose in scans:
         updater.process(scan, pose)
-    print(json.dumps({"state_bytes": updater.state_bytes(), "rss_before_kb": rss_before,
-                      "rss_after_kb": rss_kb(), "peak_before_kb": peak_before,
-                      "peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}))
+    out = {"state_bytes": updater.state_bytes(), "rss_before_kb": rss_before,
+           "rss_after_kb": rss_kb(), "peak_before_kb": peak_before,
+           "peak_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}
+    del updater
+    # the state of mapupdate update's configurations, after the resident figures above
+    out["other_states"] = {}
+    for label, config in other_configs().items():
+        updater = MapUpdater(reference(2000), config)
+        for scan, pose in scans:
+            updater.process(scan, pose)
+        out["other_states"][label] = updater.state_bytes()
+        del updater
+    print(json.dumps(out))
+
+
+def other_configs() -> dict:
+    """mapupdate update's defaults, and their rule for cells observed a few times alone (its
+    flag counts, without the hit buffers of the growth into the unknown), every scan processed
+    as in the rows of the table."""
+    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
+    return {"the paper's with unanimous_min": UpdaterConfig(
+                gating=False, unanimous_min=ROBOT_UPDATER_DEFAULTS["unanimous_min"]),
+            "mapupdate update's defaults": UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS,
+                                                            "gating": False})}
 
 
 def main() -> int:
@@ -417,6 +438,9 @@ def print_table(rows, parts, inner, mem, scans_count: int) -> None:
           f"{mem['peak_before_kb'] / 1024:.1f} MiB before the updater was made (Python, NumPy, "
           f"numba, compiled kernels, scan generation), resident then "
           f"{mem['rss_before_kb'] / 1024:.1f} MiB")
+    for label, n_bytes in mem["other_states"].items():
+        print(f"2000 x 2000 map, {label}: updater state {n_bytes:,d} bytes "
+              f"({n_bytes / 2**20:.2f} MiB)")
 
 
 if __name__ == "__main__":

@@ -691,12 +691,16 @@ def test_push_flags_against_reference():
 
 @pytest.mark.parametrize("support", [False, True])
 @pytest.mark.parametrize("few", [0, 3])
-def test_decide_incremental_equals_full_map(support, few):
+@pytest.mark.parametrize("packed", [False, True])
+def test_decide_incremental_equals_full_map(support, few, packed):
+    """Both layouts of the flag counts: an array of their own, and the bits above the flags
+    (``shift``)."""
     rng = np.random.default_rng(7 + support + 10 * few)
     data = random_map(rng, h=30, w=30, p_occ=0.3, p_unk=0.1)
     flat = data.reshape(-1)
     hist = np.zeros(data.size, np.uint16)
-    seen = np.zeros(data.size, np.uint8)
+    shift = 10 if packed else 0
+    seen = np.zeros(0 if packed else data.size, np.uint8)
     decided = np.zeros((data.size + 7) // 8, np.uint8)
     marks = np.zeros_like(decided), np.zeros_like(decided)
     moved = np.zeros(2000, np.int32)
@@ -710,16 +714,19 @@ def test_decide_incremental_equals_full_map(support, few):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
-        n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved)
-        count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support)
+        n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved,
+                         shift=shift)
+        count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support,
+                          shift=shift)
+        counts = hist >> 10 if packed else seen
         expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support,
-                                seen.reshape(30, 30), few)
+                                counts.reshape(30, 30).astype(int), few)
         got = np.unpackbits(decided, bitorder="little")[:900].reshape(30, 30).astype(bool)
         assert (got == expect).all() and count == expect.sum()
         peak = max(peak, count)
     assert peak > count > 0           # cells changed, and some changed back
     full = np.zeros_like(decided)
-    assert K.decide_all(hist, seen, flat, full, 30, 0x3FF, 7, few, support) == count
+    assert K.decide_all(hist, seen, flat, full, 30, 0x3FF, 7, few, support, shift=shift) == count
     assert (full == decided).all()
 
 

@@ -67,6 +67,20 @@ def popcount16(v):
     return _ctpop64(np.int64(v) & 0xFFFF)
 
 
+# A cell's flag count lives in a uint8 array of its own (``shift`` 0) or in the bits of its
+# buffer above the flags (``shift`` = N_b): the spare bits of a short buffer hold it for free.
+@njit(cache=True, inline="always")
+def flag_count(hist, seen, idx, shift):
+    """The flags cell ``idx`` ever got, saturating (0 when they are not counted). The count
+    saturates at its field's largest value (255 in the array of its own), where the rule reads
+    it as 'many'."""
+    if shift > 0:
+        return np.int64(hist[idx]) >> shift
+    if seen.shape[0] == 0:
+        return 0
+    return np.int64(seen[idx])
+
+
 # --- 1. beam classifier -----------------------------------------------------------------------
 @njit(cache=True)
 def valid_ranges(ranges, r_lo, r_hi, out_r, out_valid):
@@ -746,28 +760,32 @@ def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_reach, tol, 
 
 @njit(cache=True)
 def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
-                    support, width, ch_marks, un_marks, moved):
+                    support, width, ch_marks, un_marks, moved, shift=0):
     """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
     stamps), in one call. Returns the change of the number of changed cells."""
     n_moved = push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks,
-                         un_marks, moved)
+                         un_marks, moved, shift)
     return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
-                  support, ch_marks)
+                  support, ch_marks, shift)
 
 
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
-               out_moved):
+               out_moved, shift=0):
     """Shift the scan's flags into the buffers, changed flags first:
-    ``hist = ((hist << 1) | flag) & mask``, count each flag in ``seen`` (saturating at 255;
-    an empty ``seen`` counts nothing, and then ``few`` must be 0) and
+    ``hist = ((hist << 1) | flag) & mask`` in the buffer's low bits, count each flag
+    (``flag_count``: in ``seen``, or with ``shift`` > 0 above the flags; an empty ``seen``
+    and ``shift`` 0 count nothing, and then ``few`` must be 0) and
     clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
     rule for few observations, ``few`` > 0, whose observations are still below the threshold),
     as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
     changed too). Returns the count written."""
     n = 0
     n_changed = changed.shape[0]
+    # the count's lowest bit in the buffer (0: the array of its own); written out in the loop,
+    # as a call it kept the loop several times slower
+    unit = np.int64(1) << shift if shift > 0 else 0
     counting = seen.shape[0] > 0
     for k in range(n_changed + unchanged.shape[0]):
         if k < n_changed:
@@ -776,42 +794,48 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
         else:
             idx, flag = unchanged[k - n_changed], 0
             un_marks[idx >> 3] = 0
-        old = hist[idx]
+        old = np.int64(hist[idx]) & mask
         watched = few > 0 and ref[idx] == OCCUPIED
-        if old == 0 and flag == 0 and not watched:
-            if counting and seen[idx] < 255:
-                seen[idx] += 1
-            continue            # an unchanged flag into an all-unchanged buffer: no change
-        was = watched and confirmed(hist, seen, ref, idx, mask)
-        if counting and seen[idx] < 255:
+        was = watched and confirmed(hist, seen, ref, idx, mask, shift)
+        if unit > 0:
+            counted = np.int64(hist[idx]) + unit
+            if counted <= 0xFFFF:       # past it, the count (the top field) would wrap
+                hist[idx] = np.uint16(counted)
+        elif counting and seen[idx] < 255:
             seen[idx] += 1
+        if old == 0 and flag == 0 and not watched:
+            continue            # an unchanged flag into an all-unchanged buffer: no change
         new = ((old << 1) | flag) & mask
-        hist[idx] = new
+        hist[idx] = np.uint16((np.int64(hist[idx]) & ~mask) | new)
         p_old, p_new = popcount16(old), popcount16(new)
         crossed = (p_old >= threshold) != (p_new >= threshold)
-        if watched and was != confirmed(hist, seen, ref, idx, mask):
+        if watched and was != confirmed(hist, seen, ref, idx, mask, shift):
             crossed = True      # its neighbours' unanimous rule changed too
         if crossed:
             out_moved[n] = -1 - idx
             n += 1
-        elif p_old != p_new or (few > 0 and seen[idx] <= threshold):
+        elif p_old != p_new or (few > 0 and flag_count(hist, seen, idx, shift) <= threshold):
             out_moved[n] = idx
             n += 1
     return n
 
 
 @njit(cache=True, inline="always")
-def confirmed(hist, seen, ref, idx, mask):
+def confirmed(hist, seen, ref, idx, mask, shift=0):
     """An occupied cell of M whose recent flags are not all changed: a surface the scans still
-    see. The unanimous rule frees no occupied cell next to one."""
-    if ref[idx] != OCCUPIED or seen[idx] == 0:
+    see. The unanimous rule frees no occupied cell next to one. (Why a count must reach N_b
+    before it saturates: the last min(count, N_b) flags are the ones to look at.)"""
+    if ref[idx] != OCCUPIED:
+        return False
+    seen_n = flag_count(hist, seen, idx, shift)
+    if seen_n == 0:
         return False
     window = popcount16(mask)
-    return popcount16(hist[idx] & mask) < min(int(seen[idx]), window)
+    return popcount16(hist[idx] & mask) < min(seen_n, window)
 
 
 @njit(cache=True)
-def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support):
+def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support, shift=0):
     """Apply the decision rule to cell ``idx`` (flat arrays) and update its decided bit: changed
     when n_c >= T; or, with ``few`` > 0, when the cell was observed fewer than T times, at least
     ``few`` times, and every flag it got says changed (an occupied cell of M only if no occupied
@@ -822,14 +846,15 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
     if not changed and few > 0:
-        changed = n >= few and seen[idx] < threshold and n == seen[idx]
+        seen_n = flag_count(hist, seen, idx, shift)
+        changed = n >= few and seen_n < threshold and n == seen_n
         if changed and ref[idx] == OCCUPIED:     # not a cell of a surface the scans still see
             height = ref.shape[0] // width
             row, col = idx // width, idx % width
             for rr in range(max(row - 1, 0), min(row + 2, height)):
                 for cc in range(max(col - 1, 0), min(col + 2, width)):
                     j = rr * width + cc
-                    if j != idx and confirmed(hist, seen, ref, j, mask):
+                    if j != idx and confirmed(hist, seen, ref, j, mask, shift):
                         changed = False
     if not changed and support:
         height = ref.shape[0] // width
@@ -848,7 +873,8 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
 
 
 @njit(cache=True)
-def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support, stamp=None):
+def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support, stamp=None,
+           shift=0):
     """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
     crossed the threshold: no other cell's inputs changed. The rule reads only the buffers, so
     each cell is decided once however many entries name it: ``stamp`` (bits per cell, all
@@ -875,13 +901,16 @@ def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support
                 r0, r1 = max(row - 1, 0), min(row + 2, height)
                 c0, c1 = max(col - 1, 0), min(col + 2, width)
                 if not changed and few > 0:
-                    changed = n >= few and seen[i] < threshold and n == seen[i]
+                    seen_n = flag_count(hist, seen, i, shift)
+                    changed = n >= few and seen_n < threshold and n == seen_n
                     if changed and ref[i] == OCCUPIED:   # no neighbour of a seen surface
                         for rr in range(r0, r1):
                             for j in range(rr * width + c0, rr * width + c1):
-                                if j != i and ref[j] == OCCUPIED and seen[j] and \
-                                        popcount16(hist[j] & mask) < min(int(seen[j]), window):
-                                    changed = False
+                                if j != i and ref[j] == OCCUPIED:
+                                    seen_j = flag_count(hist, seen, j, shift)
+                                    if seen_j and popcount16(hist[j] & mask) < min(seen_j,
+                                                                                   window):
+                                        changed = False
                 if not changed and support:
                     occ = ref[i] != FREE
                     for rr in range(r0, r1):
@@ -921,23 +950,24 @@ def neighbourhood(idx, width, size, spread):
 
 
 @njit(cache=True)
-def decide_all(hist, seen, ref, decided, width, mask, threshold, few, support):
+def decide_all(hist, seen, ref, decided, width, mask, threshold, few, support, shift=0):
     """The decision rule over the whole map (on loading a saved state, and in tests)."""
     total = 0
     for idx in range(ref.shape[0]):
-        total += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support)
+        total += decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support,
+                             shift)
     return total
 
 
 # --- output and last check --------------------------------------------------------------------
 @njit(cache=True)
-def apply_changes(ref, decided, enclosed, width, close, hist, out):
+def apply_changes(ref, decided, enclosed, width, close, hist, out, mask=0xFFFF):
     """``out`` (a copy of ``ref``, flat) gets the changed cells flipped: free -> occupied,
     occupied or unknown -> free. With ``close``, the last check: each 8-neighbour of a cell
     that became free that lies in an enclosed unknown region of ``ref`` and is itself unchanged
-    (so still unknown) becomes occupied, unless ``hist`` (flat buffers, or an empty array)
-    holds a changed flag for it: a cell seen through, if not yet often enough to be freed, is
-    left unknown rather than drawn. Returns the count of cells the last check closed."""
+    (so still unknown) becomes occupied, unless ``hist`` (flat buffers, or an empty array;
+    the flags are its ``mask`` bits) holds a changed flag for it: a cell seen through, if not
+    yet often enough to be freed, is left unknown rather than drawn. Returns the count of cells the last check closed."""
     height = ref.shape[0] // width
     closed = 0
     for b in range(decided.shape[0]):
@@ -954,7 +984,7 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out):
                 for cc in range(max(col - 1, 0), min(col + 2, width)):
                     j = rr * width + cc
                     if bit_get(enclosed, j) and not bit_get(decided, j) and out[j] != OCCUPIED \
-                            and (hist.shape[0] == 0 or hist[j] == 0):
+                            and (hist.shape[0] == 0 or (hist[j] & mask) == 0):
                         out[j] = OCCUPIED
                         closed += 1
     return closed

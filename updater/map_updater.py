@@ -7,7 +7,8 @@ array              bytes per cell  what
 =================  ==============  ==========================================================
 reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
 buffers            2               uint16 shift registers of the last N_b flags
-flag counts        1               uint8: flags a cell ever got (saturating at 255)
+flag counts        0 or 1          flags a cell ever got (saturating): above the flags in the
+                                   buffer (N_b <= 12), else a uint8 (at 255)
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan
@@ -15,7 +16,8 @@ hit buffers        2               uint16 shift registers of hits in open unknow
 drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
 =================  ==============  ==========================================================
 
-The last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
+The flag counts are kept only for the unanimous rule (``UpdaterConfig.unanimous_min``). The
+last two rows are the growth into the unknown (``UpdaterConfig.grow_into_unknown``; with
 it off the hit buffers and hit marks take no room).
 
 A scan touches only the cells its beams reach: the flags of a scan are kept in lists, made
@@ -49,7 +51,12 @@ from . import steps
 from .config import UpdaterConfig, UpdaterError
 from .gating import CONFIRMING, SKIPPED_OFF_MAP, Gate
 
-STATE_FORMAT = 1
+# 2: the buffers are saved as held, the flag counts above the flags when they fit there (a
+# ``seen`` array otherwise). 1 (still read): the buffers hold the flags alone, ``seen`` the
+# counts, when saved at all.
+STATE_FORMAT = 2
+
+_SUMMARY_BLOCK = 1 << 20    # cells per block of evidence_summary (a multiple of 8)
 
 
 class ScanStatus(enum.Enum):
@@ -124,8 +131,10 @@ class MapUpdater:
         self._res = reference_map.resolution
         self._origin = reference_map.origin
         self._hist = np.zeros(self._ref.shape, np.uint16)
-        # flags ever pushed, saturating: only the unanimous rule needs them
-        self._seen = np.zeros(self._ref.shape if config.unanimous_min else (0, 0), np.uint8)
+        # flags ever pushed, saturating: only the unanimous rule needs them, and the spare bits
+        # of the buffers hold them when there are enough (steps.count_shift)
+        own = config.unanimous_min and not steps.count_shift(config)
+        self._seen = np.zeros(self._ref.shape if own else (0, 0), np.uint8)
         n_bytes = (self._ref.size + 7) // 8
         self._decided = np.zeros(n_bytes, np.uint8)
         self._ch_marks = np.zeros(n_bytes, np.uint8)
@@ -295,7 +304,8 @@ class MapUpdater:
         # with the unanimous rule, interiors seen through are not closed (docs/real_changes.md)
         spare = self._hist if self.config.unanimous_min else None
         cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
-                                        self.config.last_check, self._drawn, spare)
+                                        self.config.last_check, self._drawn, spare,
+                                        steps.buffer_mask(self.config))
         return OccupancyGrid(cells, self._res, self._origin)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
@@ -326,15 +336,32 @@ class MapUpdater:
         all and ``pending_outvoted`` more often (their unchanged flags outweigh the changed
         ones); those two are None when the flags are not counted (``unanimous_min`` 0).
         O(map); for summaries, not per scan."""
-        bits = np.unpackbits(self._decided, bitorder="little")[:self._ref.size]
-        pending = (self._hist.reshape(-1) != 0) & (bits == 0)
-        n_pending = int(pending.sum())
-        if not self._seen.size:     # flags not counted (unanimous_min 0): not split
+        mask, shift = np.uint16(steps.buffer_mask(self.config)), steps.count_shift(self.config)
+        counted = bool(self.config.unanimous_min)
+        hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
+        n_pending = n_few = 0
+        # in blocks: temporaries the size of a large map would outweigh the state itself
+        for lo in range(0, hist.size, _SUMMARY_BLOCK):
+            hi = min(lo + _SUMMARY_BLOCK, hist.size)
+            bits = np.unpackbits(self._decided[lo >> 3:(hi + 7) >> 3], bitorder="little")
+            pending = ((hist[lo:hi] & mask) != 0) & (bits[:hi - lo] == 0)
+            n_pending += int(pending.sum())
+            if counted:
+                counts = hist[lo:hi] >> np.uint16(shift) if shift else seen[lo:hi]
+                n_few += int((pending & (counts < self.config.threshold)).sum())
+        if not counted:             # flags not counted (unanimous_min 0): not split
             return {"pending_cells": n_pending, "pending_few_observations": None,
                     "pending_outvoted": None}
-        n_few = int((pending & (self._seen.reshape(-1) < self.config.threshold)).sum())
         return {"pending_cells": n_pending, "pending_few_observations": n_few,
                 "pending_outvoted": n_pending - n_few}
+
+    def _flag_counts(self) -> np.ndarray | None:
+        """Each cell's flag count, flat (saturated counts read as many), None when the flags
+        are not counted."""
+        shift = steps.count_shift(self.config)
+        if shift:
+            return self._hist.reshape(-1) >> np.uint16(shift)
+        return self._seen.reshape(-1) if self._seen.size else None
 
     def enclosed_unknown(self) -> np.ndarray:
         """Boolean (H, W) mask of the cells the last check may close."""
@@ -364,33 +391,49 @@ class MapUpdater:
             raise UpdaterError(f"{path}: cannot save the updater state: {e}") from None
 
     def _restore_buffers(self, path, hist: np.ndarray, hits: np.ndarray | None,
-                         seen: np.ndarray | None = None) -> None:
+                         seen: np.ndarray | None = None, packed: bool = False) -> None:
         """Take saved buffers (refused unless they fit the map and the configuration) and
-        decide every cell from them. A state saved before the flags were counted gives each
-        cell with flags the most observations (so none of them is decided by few)."""
-        if seen is None:            # saved before flags were counted
-            seen = np.where(hist != 0, 255, 0).astype(np.uint8) if self._seen.size else \
-                np.zeros((0, 0), np.uint8)
-        if seen.shape != self._seen.shape or seen.dtype != np.uint8:
-            raise UpdaterError(f"{path}: flag counts do not fit the reference map and config")
-        self._seen[...] = seen
-        mask = np.uint16(steps.buffer_mask(self.config))
-        for name, saved, into in (("buffers", hist, self._hist),
-                                  ("hit buffers", hits, self._hitbuf)):
+        decide every cell from them. ``packed``: the saved buffers hold the flag counts above
+        the flags, as this updater keeps them; else they hold the flags alone and the counts
+        come from ``seen``. A state saved before the flags were counted gives each cell with
+        flags the most observations (so none of them is decided by few)."""
+        mask = steps.buffer_mask(self.config)
+        for name, saved, into, bits in (("buffers", hist, self._hist, 0xFFFF if packed else mask),
+                                        ("hit buffers", hits, self._hitbuf, mask)):
             if saved is None or (saved.size == 0 and into.size == 0):
                 continue
-            if saved.shape != into.shape or saved.dtype != np.uint16 or np.any(saved & ~mask):
+            if saved.shape != into.shape or saved.dtype != np.uint16 or \
+                    np.any(saved & np.uint16(0xFFFF & ~bits)):
                 raise UpdaterError(f"{path}: {name} do not fit the reference map and config")
             into[...] = saved
+        if not packed:
+            self._restore_counts(path, hist, seen)
         ref = self._ref.reshape(-1)
         self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
                                                           self._seen.reshape(-1), ref,
                                                           self._ref.shape[1], self.config)
         if self.config.grow_into_unknown:
             self._n_drawn = int(steps.kernels().decide_drawn(
-                self._hitbuf.reshape(-1), ref, self._enclosed, mask=mask,
+                self._hitbuf.reshape(-1), ref, self._enclosed, mask=np.uint16(mask),
                 threshold=self.config.threshold, few=self.config.unanimous_min,
                 drawn=self._drawn))
+
+    def _restore_counts(self, path, hist: np.ndarray, seen: np.ndarray | None) -> None:
+        """The flag counts of a state whose buffers hold the flags alone (``seen``, or None
+        when saved before they were counted), into this updater's layout. A count past what
+        its field holds saturates there: the rule reads every count from N_b on alike."""
+        counted = bool(self.config.unanimous_min)
+        if seen is None:            # saved before flags were counted
+            seen = np.where(hist != 0, 255, 0).astype(np.uint8) if counted else \
+                np.zeros((0, 0), np.uint8)
+        if seen.shape != (self._ref.shape if counted else (0, 0)) or seen.dtype != np.uint8:
+            raise UpdaterError(f"{path}: flag counts do not fit the reference map and config")
+        shift = steps.count_shift(self.config)
+        if shift:
+            top = np.uint16(0xFFFF >> shift)
+            self._hist |= np.minimum(seen.astype(np.uint16), top) << np.uint16(shift)
+        else:
+            self._seen[...] = seen
 
     @classmethod
     def load(cls, path) -> MapUpdater:
@@ -413,9 +456,9 @@ class MapUpdater:
         except Exception as e:  # noqa: BLE001
             raise UpdaterError(f"{path}: not a readable updater state file "
                                f"({type(e).__name__}: {' '.join(str(e).split())})") from None
-        if not isinstance(meta, dict) or meta.get("format") != STATE_FORMAT:
-            got = meta.get("format") if isinstance(meta, dict) else None
-            raise UpdaterError(f"{path}: state format {got!r}, expected {STATE_FORMAT}")
+        got = meta.get("format") if isinstance(meta, dict) else None
+        if got not in (1, STATE_FORMAT) or isinstance(got, bool):
+            raise UpdaterError(f"{path}: state format {got!r}, expected 1 or {STATE_FORMAT}")
         missing = [k for k in ("config", "resolution", "origin", "gate", "counts")
                    if k not in meta]
         if missing:
@@ -426,7 +469,8 @@ class MapUpdater:
         except (GridError, TypeError, ValueError) as e:
             raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
         updater = cls(grid, config)
-        updater._restore_buffers(path, hist, hits, seen)
+        packed = got == STATE_FORMAT and steps.count_shift(config) > 0
+        updater._restore_buffers(path, hist, hits, seen, packed)
         _check_gate_state(path, meta["gate"])
         try:
             updater._gate.restore(meta["gate"])

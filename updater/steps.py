@@ -462,18 +462,30 @@ def buffer_mask(cfg: UpdaterConfig) -> int:
     return (1 << cfg.buffer_size) - 1
 
 
+def count_shift(cfg: UpdaterConfig) -> int:
+    """Where each cell's flag count lives: 0 in an array of its own (or nowhere, when the flags
+    are not counted: ``unanimous_min`` 0), else the bit of the buffer the count starts at,
+    N_b. The rule reads the count up to N_b (the last min(count, N_b) flags tell a surface the
+    scans still see), so the spare bits hold it when they count to N_b: N_b <= 12."""
+    if not cfg.unanimous_min or (0xFFFF >> cfg.buffer_size) < cfg.buffer_size:
+        return 0
+    return cfg.buffer_size
+
+
 def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                n_changed: int, n_unchanged: int, cfg: UpdaterConfig, ch_marks: np.ndarray,
                un_marks: np.ndarray, ws: Workspace) -> int:
     """Shift the scan's flags into the cells' buffers, changed flags first:
-    ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``, and count them in ``seen_flat`` (flags
-    a cell ever got, saturating at 255). Only flagged cells are touched. Returns the count of
+    ``hist = ((hist << 1) | flag) & ((1 << N_b) - 1)``, and count them (flags a cell ever
+    got, saturating: above the flags when ``count_shift`` says so, else in ``seen_flat``, at
+    255). Only flagged cells are touched. Returns the count of
     entries written to ``ws.moved`` (cells whose decision inputs changed)."""
     ws.for_moved(n_changed + n_unchanged)
     return kernels().push_flags(hist_flat, seen_flat, ref_flat, changed=ws.changed[:n_changed],
                                 unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg),
                                 threshold=cfg.threshold, few=cfg.unanimous_min,
-                                ch_marks=ch_marks, un_marks=un_marks, out_moved=ws.moved)
+                                ch_marks=ch_marks, un_marks=un_marks, out_moved=ws.moved,
+                                shift=count_shift(cfg))
 
 
 def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
@@ -486,7 +498,8 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
     of the number of changed cells."""
     return kernels().decide(hist_flat, seen_flat, ref_flat, decided, moved=ws.moved[:n_moved],
                             width=width, mask=buffer_mask(cfg), threshold=cfg.threshold,
-                            few=cfg.unanimous_min, support=cfg.neighbour_support, stamp=stamp)
+                            few=cfg.unanimous_min, support=cfg.neighbour_support, stamp=stamp,
+                            shift=count_shift(cfg))
 
 
 def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
@@ -501,7 +514,7 @@ def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.n
         hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
         unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg), threshold=cfg.threshold,
         few=cfg.unanimous_min, support=cfg.neighbour_support, width=width, ch_marks=ch_marks,
-        un_marks=un_marks, moved=ws.moved))
+        un_marks=un_marks, moved=ws.moved, shift=count_shift(cfg)))
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,
@@ -510,24 +523,28 @@ def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
     decided = np.zeros((ref_flat.size + 7) // 8, np.uint8)
     count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width=width,
                                  mask=buffer_mask(cfg), threshold=cfg.threshold,
-                                 few=cfg.unanimous_min, support=cfg.neighbour_support)
+                                 few=cfg.unanimous_min, support=cfg.neighbour_support,
+                                 shift=count_shift(cfg))
     return decided, int(count)
 
 
 # --- output and last check --------------------------------------------------------------------
 def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
                    last_check: bool, drawn: np.ndarray | None = None,
-                   seen_through: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                   seen_through: np.ndarray | None = None,
+                   mask: int = 0xFFFF) -> tuple[np.ndarray, int]:
     """The output cells: M with the changed cells flipped (free <-> occupied, unknown seen
     through -> free) and, with ``last_check``, the outline of removed objects closed: each
     8-neighbour of a cell that became free that lies in an enclosed unknown region of M and is
     still unknown becomes occupied. The ``drawn`` cells (open unknown space hit often enough)
-    become occupied. With ``seen_through`` (the buffers), a cell that holds a changed flag is
-    not closed. Returns (cells, count closed by the last check)."""
+    become occupied. With ``seen_through`` (the buffers, their flags in the ``mask`` bits), a
+    cell that holds a changed flag is not closed. Returns (cells, count closed by the last
+    check)."""
     out = ref.copy()
     hist = np.zeros(0, np.uint16) if seen_through is None else seen_through.reshape(-1)
     closed = kernels().apply_changes(ref.reshape(-1), decided, enclosed, width=ref.shape[1],
-                                     close=last_check, hist=hist, out=out.reshape(-1))
+                                     close=last_check, hist=hist, out=out.reshape(-1),
+                                     mask=mask)
     if drawn is not None:
         kernels().apply_drawn(drawn, out.reshape(-1))
     return out, int(closed)

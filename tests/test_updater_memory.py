@@ -1,0 +1,173 @@
+"""The updater's state stays small: the flag counts of the unanimous rule ride in the spare
+bits of the flag buffers when there are enough of them.
+
+The state of a 2000 x 2000 map is summed from the arrays the updater holds (their ``nbytes``,
+the per-beam workspace included) after it processed real scans; the counts packed above the
+flags are checked against a plain count of random flag sequences, past saturation; and a
+state file of the layout before (the flags alone in the buffers, a ``seen`` array of counts up
+to 255), written by the code kept in ``benchmarks/updater_before``, loads and continues as the
+code that wrote it does.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gridmap import UNKNOWN, OccupancyGrid
+from robot.robot_config import ROBOT_UPDATER_DEFAULTS
+from updater import MapUpdater, UpdaterConfig, UpdaterError, steps
+from updater import _kernels as K
+
+try:
+    from test_updater_speedup import room_session, unknown_corner
+except ImportError:  # tests collected as a package
+    from tests.test_updater_speedup import room_session, unknown_corner
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
+
+BAR_BYTES = 16e6
+SIZE = 2000
+
+
+def embedded(ref: OccupancyGrid, size: int) -> OccupancyGrid:
+    """``ref`` in the middle of a size x size map of unknown cells, at the same place."""
+    data = np.full((size, size), UNKNOWN, np.int8)
+    k = (size - ref.data.shape[0]) // 2
+    data[k:k + ref.data.shape[0], k:k + ref.data.shape[1]] = ref.data
+    origin = (ref.origin[0] - k * ref.resolution, ref.origin[1] - k * ref.resolution)
+    return OccupancyGrid(data, ref.resolution, origin)
+
+
+@pytest.fixture(scope="module")
+def session():
+    return room_session(3.0, 5)
+
+
+def state_after_scans(config: UpdaterConfig, session) -> int:
+    ref, scans, _ = session
+    updater = MapUpdater(embedded(ref, SIZE), config)
+    for scan, noisy, true in scans:
+        updater.process(scan, noisy, odometry=true)
+    assert updater.stats["processed"] > 0
+    return updater.state_bytes()
+
+
+def test_a_2000_map_with_the_unanimous_rule_stays_within_16_mb(session):
+    # the decision rules of mapupdate update: the unanimous rule counts each cell's flags
+    rules = UpdaterConfig(gating=False, unanimous_min=ROBOT_UPDATER_DEFAULTS["unanimous_min"])
+    assert steps.count_shift(rules) == rules.buffer_size
+    assert state_after_scans(rules, session) <= BAR_BYTES
+
+
+def test_the_flag_counts_take_no_bytes_with_the_robots_defaults(session):
+    """With the growth into the unknown, its hit buffers (two bytes a cell) come on top: the
+    counts add nothing to them."""
+    robot = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+    uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0})
+    assert state_after_scans(robot, session) == state_after_scans(uncounted, session)
+
+
+@pytest.mark.parametrize("buffer_size, threshold", [(10, 7), (12, 12), (11, 8)])
+def test_packed_counts_are_a_plain_count_saturating_at_the_top_of_their_field(buffer_size,
+                                                                             threshold):
+    rng = np.random.default_rng(buffer_size)
+    cfg = UpdaterConfig(buffer_size=buffer_size, threshold=threshold, unanimous_min=2)
+    shift, mask = steps.count_shift(cfg), steps.buffer_mask(cfg)
+    top = 0xFFFF >> shift
+    cells = 40
+    hist = np.zeros(cells, np.uint16)
+    plain_flags, plain_count = np.zeros(cells, np.int64), np.zeros(cells, np.int64)
+    marks = np.zeros((cells + 7) // 8, np.uint8), np.zeros((cells + 7) // 8, np.uint8)
+    moved = np.zeros(2 * cells, np.int32)
+    # cells flagged at different rates: some stay below T, some pass the field's top
+    rates = np.linspace(0.02, 1.0, cells)
+    ref = np.zeros(cells, np.int8)
+    ref[::3] = 100          # occupied cells of M are watched by the unanimous rule's guard
+    for _ in range(3 * top if top < 100 else 120):
+        flagged = np.flatnonzero(rng.random(cells) < rates)
+        is_changed = rng.random(flagged.size) < 0.6
+        changed, unchanged = (flagged[is_changed].astype(np.int32),
+                              flagged[~is_changed].astype(np.int32))
+        K.push_flags(hist, np.zeros(0, np.uint8), ref, changed=changed, unchanged=unchanged,
+                     mask=mask, threshold=threshold, few=2, ch_marks=marks[0],
+                     un_marks=marks[1], out_moved=moved, shift=shift)
+        for idx, flag in [(i, 1) for i in changed] + [(i, 0) for i in unchanged]:
+            plain_flags[idx] = ((plain_flags[idx] << 1) | flag) & mask
+            plain_count[idx] += 1
+    assert (hist & mask).tolist() == plain_flags.tolist()
+    assert (hist >> shift).tolist() == np.minimum(plain_count, top).tolist()
+    assert top >= buffer_size and plain_count.max() > top >= (hist >> shift).max()
+    assert (plain_count < threshold).any()
+
+
+def test_no_count_field_where_the_buffer_leaves_too_few_bits():
+    assert steps.count_shift(UpdaterConfig(buffer_size=12, threshold=7, unanimous_min=3)) == 12
+    for n_b in (13, 16):
+        cfg = UpdaterConfig(buffer_size=n_b, threshold=7, unanimous_min=3)
+        assert steps.count_shift(cfg) == 0
+        ref = OccupancyGrid(np.zeros((30, 40), np.int8), 0.05)
+        assert MapUpdater(ref, cfg)._seen.shape == (30, 40)
+    assert steps.count_shift(UpdaterConfig()) == 0       # the paper's rules count nothing
+
+
+def same_run(a, b, scans) -> None:
+    for scan, noisy, true in scans:
+        assert a.process(scan, noisy, odometry=true).summary() == \
+            b.process(scan, noisy, odometry=true).summary()
+    assert np.array_equal(a.updated_map().data, b.updated_map().data)
+    assert a.evidence_summary() == b.evidence_summary()
+    assert np.array_equal(a.change_counts(), b.change_counts())
+
+
+def test_a_state_of_the_layout_before_loads_and_continues_alike(tmp_path):
+    ref, scans, _ = room_session(16.0, 1)
+    ref = unknown_corner(ref)
+    before = BeforeMapUpdater(ref, UpdaterConfig(**ROBOT_UPDATER_DEFAULTS))
+    half = len(scans) // 2
+    for scan, noisy, true in scans[:half]:
+        before.process(scan, noisy, odometry=true)
+    assert before._seen.max() > 0xFFFF >> 10        # counts past the packed field's top
+    before.save(tmp_path / "old.npz")
+    with np.load(tmp_path / "old.npz") as z:
+        assert "seen" in z.files and not np.any(z["hist"] >> 10)
+    loaded = MapUpdater.load(tmp_path / "old.npz")
+    assert loaded._seen.size == 0
+    same_run(loaded, before, scans[half:])
+    # saved in the new layout, loaded again: the same state
+    loaded.save(tmp_path / "new.npz")
+    again = MapUpdater.load(tmp_path / "new.npz")
+    assert np.array_equal(again._hist, loaded._hist)
+    assert again.evidence_summary() == loaded.evidence_summary()
+
+
+def test_a_state_that_does_not_fit_is_refused_in_one_line(tmp_path):
+    ref, scans, _ = room_session(2.0, 2)
+    before = BeforeMapUpdater(ref, UpdaterConfig(**ROBOT_UPDATER_DEFAULTS))
+    for scan, noisy, true in scans:
+        before.process(scan, noisy, odometry=true)
+    before._seen = before._seen[:, :-1].copy()        # counts of another map
+    before.save(tmp_path / "bad.npz")
+    with pytest.raises(UpdaterError, match="flag counts do not fit") as err:
+        MapUpdater.load(tmp_path / "bad.npz")
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("buffer_size", [10, 14])
+def test_a_state_of_either_layout_saves_and_loads_as_it_was(tmp_path, buffer_size):
+    ref, scans, _ = room_session(4.0, 3)
+    config = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "buffer_size": buffer_size})
+    updater, twin = MapUpdater(ref, config), BeforeMapUpdater(ref, config)
+    half = len(scans) // 2
+    for scan, noisy, true in scans[:half]:
+        updater.process(scan, noisy, odometry=true)
+        twin.process(scan, noisy, odometry=true)
+    updater.save(tmp_path / "s.npz")
+    loaded = MapUpdater.load(tmp_path / "s.npz")
+    assert np.array_equal(loaded._hist, updater._hist)
+    assert np.array_equal(loaded._seen, updater._seen)
+    same_run(loaded, twin, scans[half:])

@@ -19,7 +19,10 @@ one cell of slack), and scans dropped by the lost check or refused by the pose c
 (without a localiser here, only its scan-fit part, not its covariance part): it refuses a scan
 when a pose of a small grid around the one given fits the scan to M1 clearly better.
 
-    python benchmarks/bench_mislocalisation.py [--quick] [--session W2]
+    python benchmarks/bench_mislocalisation.py [--quick] [--session W2] [--before]
+
+``--before`` guards with the frozen copy of the pose check before its grid kernels
+(``benchmarks/pose_check_before``): the table must come out the same.
 
 Bars (exit 1 when missed), with the pose check: no G-occupied cell freed from 0.1 m or 1 deg of
 error on, nor after the kidnapping; no hole at any level. Below that (0.05 m, 0.5 deg: under a
@@ -211,9 +214,14 @@ def level_size(level: str) -> tuple[float, float]:
 
 
 def run_table(rec: Recording, levels: dict[str, list[Error]], guard_config=None,
-              progress: bool = True) -> list[tuple[str, int, Damage, Damage]]:
-    """(level, variants, damage without the pose check, damage with it) per level."""
-    from localization.confidence import PoseCheck
+              progress: bool = True, before: bool = False
+              ) -> list[tuple[str, int, Damage, Damage]]:
+    """(level, variants, damage without the pose check, damage with it) per level;
+    ``before``: the pose check's frozen copy (``benchmarks/pose_check_before``)."""
+    if before:
+        from benchmarks.pose_check_before import PoseCheck
+    else:
+        from localization.confidence import PoseCheck
 
     guard = PoseCheck(rec.reference, guard_config)
     rows = []
@@ -245,12 +253,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--session", default="W2")
     ap.add_argument("--quick", action="store_true", help="30 m of the route")
+    ap.add_argument("--before", action="store_true",
+                    help="the pose check as it was before its grid kernels")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rec = record(args.session, args.quick)
     print(f"{args.session}: {len(rec.scans)} scans recorded in "
           f"{time.perf_counter() - t0:.1f} s", file=sys.stderr)
-    rows = run_table(rec, error_levels())
+    rows = run_table(rec, error_levels(), before=args.before)
     print_table(rows, rows[0][2].processed)
     print(f"\nWall time {time.perf_counter() - t0:.0f} s.")
     freed = [name for name, _, _, g in rows if detectable(name) and g.freed]

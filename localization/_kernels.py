@@ -130,6 +130,157 @@ def interpolated_fit(poses, mount, beams, residual, frame, out):
         out[i] = total / max(beams.shape[0], 1)
 
 
+
+# The pose check scores regular grids of poses around one pose: (x offsets) x (y offsets) x
+# (heading offsets). An end point's map column depends only on a pose's x and heading, its row
+# only on its y and heading, so for each heading and beam the columns of every x offset and the
+# rows of every y offset are found once and combined, instead of transforming the end point
+# anew for each of the grid's poses. The arithmetic per coordinate is ``sensor_in_map``'s and
+# ``beam_cells``' (or ``interpolated_fit``'s), and each pose adds its beams in beam order, so
+# the scores are theirs to the bit for the poses ``base + (x, y, heading offset)``. The loops
+# over the grid stay in the kernel's own body: with the innermost one in a helper called per
+# row of sums, the calls (arrays passed, a row as a view) cost several times the sums.
+
+
+@njit(cache=True)
+def sensor_axes(base, mount, xs, ys, turn, sx, sy):
+    """The sensor at heading ``base[2] + turn``: its x for the robot at ``base[0] + xs[a]``
+    into ``sx[a]``, its y for the robot at ``base[1] + ys[b]`` into ``sy[b]``, and (cos, sin)
+    of its heading in the map; ``sensor_in_map`` split by axis."""
+    th = base[2] + turn
+    c, s = math.cos(th), math.sin(th)
+    cm, sm = math.cos(mount[2]), math.sin(mount[2])
+    for a in range(xs.shape[0]):
+        sx[a] = (base[0] + xs[a]) + c * mount[0] - s * mount[1]
+    for b in range(ys.shape[0]):
+        sy[b] = (base[1] + ys[b]) + s * mount[0] + c * mount[1]
+    return c * cm - s * sm, s * cm + c * sm
+
+
+# Beams added between two looks at which poses of a grid can still reach the floor.
+PRUNE_EVERY = 8
+# How far below the floor a sum must lie to be dropped: then it stays below the floor's sum
+# after both are divided by the beam count and rounded, so the two cannot tie.
+FLOOR_SLACK = 1e-9
+
+
+@njit(cache=True)
+def grid_table_sums(base, mount, beams, table, frame, off_value, xs, ys, turns, floor, out):
+    """``likelihood_field`` with base 0 on the grid of poses ``base + (xs[a], ys[b],
+    turns[t])``: ``out[(a * len(ys) + b) * len(turns) + t]`` is the sum over the beams of
+    ``table`` at the beam's end point, ``off_value`` off the grid.
+
+    With ``table`` and ``off_value`` <= 0 a sum can only fall as beams are added, so a pose
+    whose sum so far lies more than FLOOR_SLACK below ``floor`` cannot end above it: the poses
+    of one x offset and heading are dropped once all of theirs do, and get -inf. A caller
+    after the greatest sum passes the sum of one of the grid's poses (or -inf to drop none)."""
+    h, w = table.shape
+    nx, ny, nt = xs.shape[0], ys.shape[0], turns.shape[0]
+    ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
+    fw, fh = float(w), float(h)
+    flat = table.ravel()
+    sx, sy = np.empty(nx), np.empty(ny)
+    cols, rows = np.empty(nx, np.int64), np.empty(ny, np.int64)    # -1: off the grid
+    acc, live = np.empty(nx * ny), np.empty(nx, np.bool_)
+    for t in range(nt):
+        cs, ss = sensor_axes(base, mount, xs, ys, turns[t], sx, sy)
+        acc[:] = 0.0
+        live[:] = True
+        for j in range(beams.shape[0]):
+            bx, by = beams[j, 0], beams[j, 1]
+            for a in range(nx):
+                gx = (sx[a] + cs * bx - ss * by - ox) * inv_res
+                cols[a] = np.int64(gx) if (gx >= 0.0) & (gx < fw) else -1
+            for b in range(ny):
+                gy = (sy[b] + ss * bx + cs * by - oy) * inv_res
+                rows[b] = np.int64(gy) * w if (gy >= 0.0) & (gy < fh) else -1
+            for a in range(nx):
+                col, k = cols[a], a * ny
+                if not live[a]:
+                    continue
+                if col < 0:
+                    for b in range(ny):
+                        acc[k + b] += off_value
+                    continue
+                for b in range(ny):
+                    r = rows[b]
+                    acc[k + b] += flat[r + col] if r >= 0 else off_value
+            if (j + 1) % PRUNE_EVERY == 0 and floor > -np.inf and \
+                    not keep_live(acc, ny, floor - FLOOR_SLACK, live):
+                break
+        for k in range(nx * ny):
+            out[k * nt + t] = acc[k] if live[k // ny] else -np.inf
+
+
+@njit(cache=True)
+def keep_live(acc, ny, least, live):
+    """Keep ``live[a]`` only where a sum ``acc[a * ny + b]`` is at least ``least``; whether any
+    is."""
+    any_live = False
+    for a in range(live.shape[0]):
+        if live[a]:
+            keep = False
+            for b in range(ny):
+                keep |= acc[a * ny + b] >= least
+            live[a] = keep
+            any_live |= keep
+    return any_live
+
+
+@njit(cache=True)
+def grid_interpolated_fit(base, mount, beams, residual, frame, xs, ys, turns, out):
+    """``interpolated_fit`` on the grid of poses ``base + (xs[a], ys[b], turns[t])`` into
+    ``out[(a * len(ys) + b) * len(turns) + t]``, for a ``residual`` grid of at least 2 x 2
+    cells."""
+    h, w = residual.shape
+    nx, ny, nt = xs.shape[0], ys.shape[0], turns.shape[0]
+    ox, oy, inv_res = frame[0], frame[1], 1.0 / frame[2]
+    flat = residual.ravel()
+    sx, sy = np.empty(nx), np.empty(ny)
+    cols, rows = np.empty(nx, np.int64), np.empty(ny, np.int64)    # -1: off the grid
+    fx, fy, gy = np.empty(nx), np.empty(ny), np.empty(ny)
+    total = np.empty(nx * ny)
+    for t in range(nt):
+        cs, ss = sensor_axes(base, mount, xs, ys, turns[t], sx, sy)
+        total[:] = 0.0
+        for j in range(beams.shape[0]):
+            bx, by = beams[j, 0], beams[j, 1]
+            for a in range(nx):
+                cols[a], fx[a] = cell_fraction((sx[a] + cs * bx - ss * by - ox) * inv_res - 0.5,
+                                               w)
+            for b in range(ny):
+                r, fy[b] = cell_fraction((sy[b] + ss * bx + cs * by - oy) * inv_res - 0.5, h)
+                rows[b] = r * w if r >= 0 else -1
+                gy[b] = 1 - fy[b]
+            for a in range(nx):
+                col, k = cols[a], a * ny
+                if col < 0:
+                    for b in range(ny):
+                        total[k + b] += 1.0
+                    continue
+                f, g = fx[a], 1 - fx[a]
+                for b in range(ny):
+                    if rows[b] < 0:
+                        total[k + b] += 1.0
+                    else:
+                        i = rows[b] + col
+                        v = (flat[i] * g + flat[i + 1] * f) * gy[b] + \
+                            (flat[i + w] * g + flat[i + w + 1] * f) * fy[b]
+                        total[k + b] += v * v
+        for k in range(nx * ny):
+            out[k * nt + t] = total[k] / max(beams.shape[0], 1)
+
+
+@njit(cache=True)
+def cell_fraction(g, n):
+    """(first cell, fraction) of grid coordinate ``g`` between the centres of an axis of ``n``
+    >= 2 cells, as ``interpolated_fit`` takes them; (-1, 0) off the grid."""
+    if g < 0.0 or g > n - 1:
+        return -1, 0.0
+    k = min(int(g), n - 2)
+    return k, g - k
+
+
 @njit(cache=True)
 def bin_key(pose, bin_size, n_theta):
     """The KLD histogram bin of one pose as one int64 key; theta bins wrap around."""

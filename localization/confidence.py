@@ -20,7 +20,10 @@ at a wrong pose, some nearby pose fits clearly better. So:
 
 ``PoseCheck.check`` turns these, and the localiser's covariance when there is one, into a reason
 to skip the scan ("" when the pose can be trusted). It imports only ``gridmap``; the scoring is
-the localiser's likelihood-field kernel with a table of its own, one call per grid of poses.
+the localiser's likelihood-field arithmetic with a table of its own, one kernel call per grid of
+poses (``_kernels.grid_table_sums``, ``_kernels.grid_interpolated_fit``): an end point's map
+column is found once for each x offset and its row once for each y offset, and poses that can
+no longer beat the given one are dropped as their beams are added.
 
 A refusal holds for ``retry_interval`` seconds of scan time: the scans that follow within it are
 refused with the same reason and nothing is scored. The map updater does not advance its gate
@@ -145,11 +148,27 @@ class PoseFit:
 def search_grid(step: float, steps: int, step_rad: float, steps_rad: int) -> np.ndarray:
     """Offsets (N, 3) of a regular grid, (2 steps + 1)^2 positions x (2 steps_rad + 1) headings;
     row 0 is the zero offset."""
-    xy = step * np.arange(-steps, steps + 1)
-    th = step_rad * np.arange(-steps_rad, steps_rad + 1)
-    grid = np.array(np.meshgrid(xy, xy, th, indexing="ij")).reshape(3, -1).T
-    zero = np.flatnonzero(~grid.any(axis=1))
-    return np.ascontiguousarray(np.vstack([grid[zero], np.delete(grid, zero, axis=0)]))
+    return SearchGrid(step, steps, step_rad, steps_rad).offsets
+
+
+class SearchGrid:
+    """A regular grid of pose offsets, as its axes (what the kernels take: ``xy`` for x and
+    for y, ``turns`` for the heading) and as rows (``offsets``, the zero offset first). The
+    kernels write a score per pose in axis order, x slowest and heading fastest; ``order``
+    takes those scores to the rows' order."""
+
+    def __init__(self, step: float, steps: int, step_rad: float, steps_rad: int):
+        self.xy = step * np.arange(-steps, steps + 1)
+        self.turns = step_rad * np.arange(-steps_rad, steps_rad + 1)
+        grid = np.array(np.meshgrid(self.xy, self.xy, self.turns, indexing="ij"))
+        grid = grid.reshape(3, -1).T
+        zero = np.flatnonzero(~grid.any(axis=1))
+        self.order = np.concatenate([zero, np.delete(np.arange(grid.shape[0]), zero)])
+        self.offsets = np.ascontiguousarray(grid[self.order])
+
+    @property
+    def size(self) -> int:
+        return self.order.shape[0]
 
 
 class PoseCheck:
@@ -178,13 +197,18 @@ class PoseCheck:
         self._table = np.ascontiguousarray(-(residual * residual), dtype=np.float32)
         self._residual = np.ascontiguousarray(residual, dtype=np.float32)
         self._frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
-        self._offsets = np.vstack([
-            search_grid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
-                        c.fine_steps_deg),
-            search_grid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
-                        c.coarse_steps_deg)[1:]])
-        self._polish = search_grid(c.polish_step, c.polish_steps, math.radians(c.polish_step_deg),
-                                   c.polish_steps)
+        self._grids = (
+            SearchGrid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
+                       c.fine_steps_deg),
+            SearchGrid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
+                       c.coarse_steps_deg))
+        fine, coarse = self._grids
+        # both grids' scores in one array; the coarse grid's zero offset is the fine one's
+        self._offsets = np.vstack([fine.offsets, coarse.offsets[1:]])
+        self._order = np.concatenate([fine.order, fine.size + coarse.order[1:]])
+        self._given = SearchGrid(0.0, 0, 0.0, 0)
+        self._polish = SearchGrid(c.polish_step, c.polish_steps,
+                                  math.radians(c.polish_step_deg), c.polish_steps)
         self._refused_at: float | None = None   # [s] scan time of the refusal that holds
         self._refused_reason = ""
         self._latest: float | None = None       # [s] latest scan time seen
@@ -203,17 +227,32 @@ class PoseCheck:
         """``fit`` with the scan's beams already selected."""
         if beams.count == 0:
             return None
-        from . import _kernels
-
-        score = np.empty(self._offsets.shape[0])
-        _kernels.likelihood_field(robot_pose.as_array() + self._offsets, sensor_mount.as_array(),
-                                  beams.points, table=self._table, frame=self._frame,
-                                  off_value=-1.0, base=0.0, out=score)
+        base, mount = robot_pose.as_array(), sensor_mount.as_array()
+        # The given pose's sum first: poses that cannot beat it are dropped early.
+        given = self._table_sums(self._given, base, mount, beams, -np.inf, np.empty(1))
+        sums = np.empty(sum(g.size for g in self._grids))
+        start = 0
+        for g in self._grids:
+            self._table_sums(g, base, mount, beams, given[0], sums[start:start + g.size])
+            start += g.size
+        score = sums[self._order]
         score /= -beams.count
         best = int(np.argmin(score))
         dx, dy, dth = self._offsets[best]
         return PoseFit(float(score[0]), float(score[0] - score[best]),
                        Pose2D(float(dx), float(dy), float(dth)), beams.count)
+
+    def _table_sums(self, g: SearchGrid, base: np.ndarray, mount: np.ndarray, beams,
+                    floor: float, out: np.ndarray) -> np.ndarray:
+        """The table's sums over the beams at the poses ``base`` + the offsets of ``g``, in
+        axis order, those below ``floor`` possibly -inf (``_kernels.grid_table_sums``; the
+        table's entries and the off-grid value are <= 0, as it asks)."""
+        from . import _kernels
+
+        _kernels.grid_table_sums(base=base, mount=mount, beams=beams.points, table=self._table,
+                                 frame=self._frame, off_value=-1.0, xs=g.xy, ys=g.xy,
+                                 turns=g.turns, floor=floor, out=out)
+        return out
 
     def better_nearby(self, f: PoseFit) -> bool:
         """True when the fit found a pose on the search grids that fits the scan clearly better
@@ -242,14 +281,24 @@ class PoseCheck:
         base = robot_pose.as_array()
         if not self._far(f.correction):
             base = base + f.correction.as_array()
+        x, y, th = base + self._polish.offsets[self._polish_best(base, sensor_mount, beams)]
+        return Pose2D(float(x), float(y), float(th))
+
+    def _polish_best(self, base: np.ndarray, sensor_mount: Pose2D, beams) -> int:
+        """The row of the polish grid's offsets whose pose (``base`` + the offset) fits the
+        beams best; the first such row on a tie."""
         from . import _kernels
 
-        poses = base + self._polish
-        score = np.empty(poses.shape[0])
-        _kernels.interpolated_fit(poses, sensor_mount.as_array(), beams.points, self._residual,
-                                  self._frame, score)
-        x, y, th = poses[int(np.argmin(score))]
-        return Pose2D(float(x), float(y), float(th))
+        g, mount, score = self._polish, sensor_mount.as_array(), np.empty(self._polish.size)
+        if min(self._residual.shape) < 2:
+            # (the grid kernel's flat indexing needs two cells each way to interpolate between)
+            _kernels.interpolated_fit(base + g.offsets, mount, beams.points, self._residual,
+                                      self._frame, score)
+            return int(np.argmin(score))
+        _kernels.grid_interpolated_fit(base=base, mount=mount, beams=beams.points,
+                                       residual=self._residual, frame=self._frame, xs=g.xy,
+                                       ys=g.xy, turns=g.turns, out=score)
+        return int(np.argmin(score[g.order]))
 
     def verdict(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
                 cov: np.ndarray | None = None) -> PoseVerdict:

@@ -1,0 +1,229 @@
+"""How far a pose can be trusted with the map: a figure a caller can gate on before it lets the
+map updater change the map from that pose.
+
+A localiser that is wrong with confidence (a persistent 10 cm or 1 deg offset, a kidnapping)
+keeps a tight particle cloud, so its covariance says nothing; and most beams still pair with the
+map, so the updater's own lost check (80 % of the beams) says nothing either. Yet a persistent
+10 cm offset makes the updater free wall and rack cells (benchmarks/bench_mislocalisation.py).
+
+What does tell is the scan itself. Placed at the right pose, the beams that hit what the map
+knows end close to its occupied cells, and moving the pose can only make them fit worse. Placed
+at a wrong pose, some nearby pose fits clearly better. So:
+
+- ``fit`` [1]: the mean over the scan's beams of (min(d, cap) / cap)^2, d the distance [m] from
+  a beam's end point to the nearest occupied cell of the map; 0 is a perfect fit, 1 no fit.
+  Beams that hit something the map does not have sit at the cap wherever the pose is, so a
+  changed world raises the fit but does not tilt it towards another pose.
+- ``gain`` [1]: how much the best pose of a small grid around the given one (fine: +-0.2 m,
+  +-2 deg; coarse: +-1 m, +-12 deg) lowers the fit. It is 0 when the given pose is the best one.
+- ``correction``: the offset (dx, dy [m], dtheta [rad], map frame) to that best pose.
+
+``PoseCheck.check`` turns these, and the localiser's covariance when there is one, into a reason
+to skip the scan ("" when the pose can be trusted). It imports only ``gridmap``; the scoring is
+the localiser's likelihood-field kernel with a table of its own, one call per grid of poses.
+
+A refusal holds for ``retry_interval`` seconds of scan time: the scans that follow within it are
+refused with the same reason and nothing is scored. The map updater does not advance its gate
+past a refused scan, so without the hold it would ask again at the scan rate (every 0.1 s at
+10 Hz), and the search grids would cost the most exactly where localisation is worst. Time is
+the scans' own: a scan no later than the refusal (another lidar's scan of the same instant, a
+stream without times) is judged afresh, and a scan earlier than the latest one seen (a new
+pass over a log, a new session with the same check) ends the hold; ``reset`` ends it too.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gridmap import OccupancyGrid, Pose2D, PoseVerdict, Scan
+from gridmap.distance import distance_to_occupied
+
+from localization.config import LocalizationError
+from localization.confidence import PoseCheckConfig  # the live configuration
+from localization.sensor import select_beams
+
+# Why a pose was not trusted (returned by PoseCheck.check).
+UNSURE_FIT = "pose unsure: a nearby pose fits the scan better"
+UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
+
+
+@dataclass(frozen=True)
+class PoseFit:
+    fit: float              # [1] at the given pose, 0 perfect .. 1 nothing fits
+    gain: float             # [1] how much the best pose nearby lowers it
+    correction: Pose2D      # offset to that best pose (dx, dy [m], dtheta [rad], map frame)
+    beams: int              # beams scored
+
+
+def search_grid(step: float, steps: int, step_rad: float, steps_rad: int) -> np.ndarray:
+    """Offsets (N, 3) of a regular grid, (2 steps + 1)^2 positions x (2 steps_rad + 1) headings;
+    row 0 is the zero offset."""
+    xy = step * np.arange(-steps, steps + 1)
+    th = step_rad * np.arange(-steps_rad, steps_rad + 1)
+    grid = np.array(np.meshgrid(xy, xy, th, indexing="ij")).reshape(3, -1).T
+    zero = np.flatnonzero(~grid.any(axis=1))
+    return np.ascontiguousarray(np.vstack([grid[zero], np.delete(grid, zero, axis=0)]))
+
+
+class PoseCheck:
+    """The pose check on one map. ``fit`` scores a pose; ``check`` says whether to trust it."""
+
+    def __init__(self, grid: OccupancyGrid, config: PoseCheckConfig | None = None):
+        if not isinstance(grid, OccupancyGrid):
+            raise LocalizationError(f"the map must be an OccupancyGrid, got {type(grid).__name__}")
+        self.config = PoseCheckConfig() if config is None else config
+        if not isinstance(self.config, PoseCheckConfig):
+            raise LocalizationError(f"config must be a PoseCheckConfig, got "
+                                    f"{type(config).__name__}")
+        c = self.config
+        # Slack: a beam that ends on a surface lands in the occupied cell or in the free one
+        # before it, as noise has it. Scored by centre distance, that half-cell ambiguity alone
+        # makes a pose 2-3 cm into the surface "fit better" by more than the default
+        # ``max_gain`` on a scan of long walls, which refuses right poses where a narrow field
+        # of view leaves one direction unconstrained (a 180 deg lidar along a corridor). One
+        # cell of slack makes the fit flat within a cell of a surface, at the price of missing
+        # errors of about 0.1 m and 1 deg (bench_mislocalisation: with slack such errors free
+        # G-occupied cells, without it none; figures in benchmarks/RESULTS.md).
+        slack = np.float32(grid.resolution * c.slack_cells)
+        dist = np.maximum(distance_to_occupied(grid, c.cap + slack) - slack, 0.0)
+        residual = dist / np.float32(c.cap)
+        # The kernel sums table entries: the negative squared residual, so higher is better.
+        self._table = np.ascontiguousarray(-(residual * residual), dtype=np.float32)
+        self._residual = np.ascontiguousarray(residual, dtype=np.float32)
+        self._frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
+        self._offsets = np.vstack([
+            search_grid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
+                        c.fine_steps_deg),
+            search_grid(c.coarse_step, c.coarse_steps, math.radians(c.coarse_step_deg),
+                        c.coarse_steps_deg)[1:]])
+        self._polish = search_grid(c.polish_step, c.polish_steps, math.radians(c.polish_step_deg),
+                                   c.polish_steps)
+        self._refused_at: float | None = None   # [s] scan time of the refusal that holds
+        self._refused_reason = ""
+        self._latest: float | None = None       # [s] latest scan time seen
+
+    def reset(self) -> None:
+        """Forget the refusal that holds (e.g. before a new stream of scans)."""
+        self._refused_at, self._refused_reason, self._latest = None, "", None
+
+    def fit(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
+        """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
+        ``sensor_mount`` (robot frame), and the best pose of the search grids around it; None
+        when the scan has no valid beam."""
+        return self._fit(select_beams(scan, self.config.max_beams), robot_pose, sensor_mount)
+
+    def _fit(self, beams, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
+        """``fit`` with the scan's beams already selected."""
+        if beams.count == 0:
+            return None
+        from . import _kernels
+
+        score = np.empty(self._offsets.shape[0])
+        _kernels.likelihood_field(robot_pose.as_array() + self._offsets, sensor_mount.as_array(),
+                                  beams.points, table=self._table, frame=self._frame,
+                                  off_value=-1.0, base=0.0, out=score)
+        score /= -beams.count
+        best = int(np.argmin(score))
+        dx, dy, dth = self._offsets[best]
+        return PoseFit(float(score[0]), float(score[0] - score[best]),
+                       Pose2D(float(dx), float(dy), float(dth)), beams.count)
+
+    def better_nearby(self, f: PoseFit) -> bool:
+        """True when the fit found a pose on the search grids that fits the scan clearly better
+        than the given one, and far enough away to say the given one is off: what ``check``
+        refuses for."""
+        return f.gain > self.config.max_gain and self._far(f.correction)
+
+    def refine(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+               cov: np.ndarray | None = None) -> str | Pose2D:
+        """The check, and for a trusted pose the pose that fits the scan best near it: a
+        reason to skip the scan (as ``check``), or the robot pose to use instead of
+        ``robot_pose``. That pose is the search grids' best one when it lies within
+        ``min_correction`` / ``min_correction_deg`` (a farther best pose that the check let
+        pass gains too little to move to), polished on a grid of ``polish_step`` and
+        ``polish_step_deg`` around it. A localiser's estimate between its updates carries
+        the odometry's drift since the last one, a few centimetres; faces the updater draws
+        from such poses land a cell or two off and are then, being within the pairing
+        distance of the truth, never corrected (docs/choices.md)."""
+        c = self.config
+        beams = select_beams(scan, c.max_beams)     # selected once for the check and the polish
+        reason, f = self._check(scan, robot_pose, sensor_mount, cov, beams)
+        if reason:
+            return reason
+        if f is None:
+            return robot_pose
+        base = robot_pose.as_array()
+        if not self._far(f.correction):
+            base = base + f.correction.as_array()
+        from . import _kernels
+
+        poses = base + self._polish
+        score = np.empty(poses.shape[0])
+        _kernels.interpolated_fit(poses, sensor_mount.as_array(), beams.points, self._residual,
+                                  self._frame, score)
+        x, y, th = poses[int(np.argmin(score))]
+        return Pose2D(float(x), float(y), float(th))
+
+    def verdict(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+                cov: np.ndarray | None = None) -> PoseVerdict:
+        """What ``updater.MapUpdater.process`` asks its ``pose_check``: refused with the
+        reason, accepted, or, with ``refine`` on, refined to the sensor pose to use (the
+        refined robot pose composed with ``sensor_mount``)."""
+        if not self.config.refine:
+            reason = self.check(scan, robot_pose, sensor_mount, cov)
+            return PoseVerdict.refused(reason) if reason else PoseVerdict.accepted()
+        better = self.refine(scan, robot_pose, sensor_mount, cov)
+        if isinstance(better, str):
+            return PoseVerdict.refused(better)
+        return PoseVerdict.refined(better.compose(sensor_mount))
+
+    def check(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+              cov: np.ndarray | None = None) -> str:
+        """"" when the pose can be trusted with the map, else why not (UNSURE_*). Within
+        ``retry_interval`` of scan time after a refusal, the same refusal without a new fit
+        (see the module docstring)."""
+        return self._check(scan, robot_pose, sensor_mount, cov)[0]
+
+    def _check(self, scan, robot_pose, sensor_mount, cov, beams=None
+               ) -> tuple[str, PoseFit | None]:
+        """(reason, the fit when one was made); ``beams``: the scan's selected beams, if
+        the caller has them."""
+        t = float(scan.time)
+        if not math.isfinite(t):           # no usable time: no hold either way
+            self.reset()
+            return self._judge(scan, robot_pose, sensor_mount, cov, beams)
+        if self._latest is not None and t < self._latest:
+            self.reset()                   # time went back: a new stream
+        self._latest = t
+        # (a microsecond of tolerance: 10 Hz times such as 1.3 - 1.0 are not exactly 0.3)
+        held = self._refused_at is not None and \
+            0.0 < t - self._refused_at < self.config.retry_interval - 1e-6
+        if held:
+            return self._refused_reason, None
+        reason, f = self._judge(scan, robot_pose, sensor_mount, cov, beams)
+        self._refused_at, self._refused_reason = (t, reason) if reason else (None, "")
+        return reason, f
+
+    def _judge(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D,
+               cov: np.ndarray | None, beams=None) -> tuple[str, PoseFit | None]:
+        c = self.config
+        if cov is not None:
+            cov = np.asarray(cov, np.float64)
+            if not np.all(np.isfinite(cov)) or \
+                    np.linalg.eigvalsh(cov[:2, :2]).max() > c.max_position_std ** 2 or \
+                    cov[2, 2] > math.radians(c.max_yaw_std_deg) ** 2:
+                return UNSURE_COVARIANCE, None
+        if beams is None:
+            beams = select_beams(scan, c.max_beams)
+        f = self._fit(beams, robot_pose, sensor_mount)
+        if f is None:
+            return "", None
+        return (UNSURE_FIT if self.better_nearby(f) else ""), f
+
+    def _far(self, correction: Pose2D) -> bool:
+        c = self.config
+        return math.hypot(correction.x, correction.y) >= c.min_correction - 1e-9 or \
+            abs(correction.theta) >= math.radians(c.min_correction_deg) - 1e-9

@@ -488,6 +488,7 @@ def test_pose_source_tf_without_tf2_msgs_or_a_bad_source_fails_configure(graph, 
 
 # last: the other nodes of the graph hear this replay too, and the default node keeps the first
 # replay's tf, which the same stamps would find again
+@pytest.mark.slow          # a second whole replay: the same arithmetic as tf's, by other topics
 def test_with_amcl_pose_and_odometry_the_same_map(graph, recording):
     got = _replay_and_save(graph, recording, "amcl_probe", "amcl_pose", "-p", AMCL, "-p", MOUNT)
     assert np.array_equal(got["saved"], load_map(recording / "update.yaml").data)

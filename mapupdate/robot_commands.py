@@ -51,7 +51,8 @@ def _update(args, map_path, out, trajectory):
     config = load_robot_config(args.config)
     check_outputs({"--map": map_inputs(map_path), "--log": [args.log],
                    "--config": [args.config] if args.config else [],
-                   "--state": [args.state] if args.state and args.state.exists() else []},
+                   "--state": [args.state] if args.state and args.state.exists() else [],
+                   "--store": store_files(args)},
                   {"--out": map_files(out), "--state": [args.state] if args.state else [],
                    "--trajectory": [trajectory] if trajectory else []},
                   both=("--state",))
@@ -213,12 +214,22 @@ def _store_init(st, args) -> list[str]:
     return [f"{st.name}: a map store of {len(st.log())} versions; {rule}"]
 
 
+def store_files(args) -> list[Path]:
+    """The files of ``--store`` that no output may be: an SQLite store and its journal files
+    (a PostgreSQL URL has none here)."""
+    target = getattr(args, "store", None)
+    if target is None or str(target).startswith(("postgresql://", "postgres://")):
+        return []
+    return [Path(f"{target}{suffix}") for suffix in ("", "-wal", "-shm", "-journal")]
+
+
 def _store_diff(st, args) -> list[str]:
     a, b = st.resolve(args.a), st.resolve(args.b)
     changes = st.diff(a, b)
     after = st.get(b)
     lines = report.diff_lines(a, b, changes, after.shape)
     if args.png is not None:
+        check_outputs({"--store": store_files(args)}, {"--png": [args.png]})
         before = after.data.copy().reshape(-1)
         before[changes.index] = changes.before
         w, h = write_diff_png(args.png, before.reshape(after.shape), after.data)
@@ -228,7 +239,7 @@ def _store_diff(st, args) -> list[str]:
 
 def _store_export(st, args) -> list[str]:
     number = st.resolve(args.version)
-    check_outputs({}, {"--out": map_files(args.out)})
+    check_outputs({"--store": store_files(args)}, {"--out": map_files(args.out)})
     grid = st.get(number)
     save_map(grid, args.out)
     return [f"wrote {args.out}: v{number} ({st.version(number).status}), {grid.width} x "

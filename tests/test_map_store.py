@@ -413,6 +413,25 @@ def test_update_store_refusals(tmp_path, capsys):
     assert "arguments are required: --out (see" in capsys.readouterr().err
 
 
+def test_no_output_of_a_store_command_is_the_store_itself(tmp_path, capsys):
+    save_map(grid(0), tmp_path / "map.yaml")
+    store = tmp_path / "maps.db"
+    with open_store(store, create=True) as s:
+        s.commit(grid(0), None, {})
+        s.commit(grid(1), 1, {})
+    before = store.read_bytes()
+    log = room_log(tmp_path / "gone.log", False)
+    for argv in (["store", "diff", "1", "2", "--png", store, "--store", store],
+                 ["store", "export", "latest", "--out", store, "--store", store],
+                 ["update", "--log", log, "--store", store, "--out", store, "--no-progress"],
+                 ["update", "--log", log, "--store", store, "--trajectory", store,
+                  "--no-progress"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"which is input --store ({store})" in err[0], err
+    assert store.read_bytes() == before
+
+
 def test_a_damaged_map_is_refused_never_served(tmp_path):
     import sqlite3
     import zlib

@@ -301,31 +301,17 @@ class MapUpdaterNode:
         with self._lock:
             if self.pipeline is None:
                 return self.ros["TriggerResponse"](False, "no reference map yet")
-            updated = self.pipeline.updater.updated_map()
             if self.store is None:
-                self._adopt(updated)
+                self._adopt(self.pipeline.updater.updated_map())
                 said = "the updated map is the reference now"
             else:
-                ok, said = self._commit_to_store(updated)
+                ok, said, then = self.store.commit_session(self.pipeline, self.settings.method,
+                                                           self.updater_config)
                 if not ok:
                     return self.ros["TriggerResponse"](False, said)
+                self._adopt(then)
         self._publish()
         return self.ros["TriggerResponse"](True, said)
-
-    def _commit_to_store(self, updated: OccupancyGrid) -> tuple[bool, str]:
-        """(done, what to answer); lock held."""
-        meta = {"method": self.settings.method, "scans": self.pipeline.counts.as_dict(),
-                "config": {"updater": self.updater_config.to_dict()}}
-        try:
-            number, status = self.store.commit(updated, meta)
-        except MapUpdatingError as e:
-            return False, f"cannot commit: {e}"
-        if status == "approved":
-            self._adopt(updated)
-            return True, f"committed v{number}, the reference now"
-        self._adopt(self.pipeline.updater.reference_map)
-        return True, (f"committed v{number}, pending review; the node keeps "
-                      f"v{self.store.version} until a newer one is approved")
 
     def _take_newer_version(self) -> None:
         """A newer approved version in the store becomes the reference (lock held)."""

@@ -382,22 +382,14 @@ class MapUpdaterNode(LifecycleNode):
         if self.pipeline is None:
             return _answer(response, False, "no reference map yet")
         self._drain(force=True)
-        updated = self.pipeline.updater.updated_map()
         if self.store is None:
-            self._adopt(updated)
+            self._adopt(self.pipeline.updater.updated_map())
             return _answer(response, True, "the updated map is the reference now")
-        meta = {"method": self.settings.method, "scans": self.pipeline.counts.as_dict(),
-                "config": {"updater": self.updater_config.to_dict()}}
-        try:
-            number, status = self.store.commit(updated, meta)
-        except MapUpdatingError as e:
-            return _answer(response, False, f"cannot commit: {e}")
-        if status == "approved":
-            self._adopt(updated)
-            return _answer(response, True, f"committed v{number}, the reference now")
-        self._adopt(self.pipeline.updater.reference_map)
-        return _answer(response, True, f"committed v{number}, pending review; the node keeps "
-                                       f"v{self.store.version} until a newer one is approved")
+        ok, said, then = self.store.commit_session(self.pipeline, self.settings.method,
+                                                   self.updater_config)
+        if ok:
+            self._adopt(then)
+        return _answer(response, ok, said)
 
     def _take_newer_version(self) -> None:
         """A newer approved version in the store (another robot's, or this one's reviewed)

@@ -55,6 +55,21 @@ class StoreLink:
             self.version = number
         return number, status
 
+    def commit_session(self, pipeline, method: str, updater_config) -> tuple[bool, str, object]:
+        """A node's ``commit`` with a store: (done, what to answer, the map the node goes on
+        from: the updated one when approved at once, else its reference, buffers afresh)."""
+        updated = pipeline.updater.updated_map()
+        meta = {"method": method, "scans": pipeline.counts.as_dict(),
+                "config": {"updater": updater_config.to_dict()}}
+        try:
+            number, status = self.commit(updated, meta)
+        except StoreError as e:
+            return False, f"cannot commit: {e}", None
+        if status == "approved":
+            return True, f"committed v{number}, the reference now", updated
+        return True, (f"committed v{number}, pending review; the node keeps v{self.version} "
+                      "until a newer one is approved"), pipeline.updater.reference_map
+
     def newer(self, force: bool = False) -> tuple[int, OccupancyGrid] | None:
         """A newer approved version than the node's, looked for at most every
         ``poll_period`` seconds (``force``: now)."""

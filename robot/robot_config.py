@@ -39,8 +39,9 @@ from updater import UpdaterConfig
 #   every 0.1 m or 10 deg, the angular velocity judged only over samples at most 0.5 s apart
 #   (a recording that keeps a scan a metre turns tens of degrees between scans), a fast turn
 #   at 60 deg/s (the skewed scans of a spinning lidar) holding back 0.5 s of scans rather than
-#   1.6 m of travel, turning in place processed until the headings seen cover the circle, and
-#   the scans held back still confirming the surfaces they hit (gate_confirm);
+#   1.6 m of travel, turning in place processed while a direction it sees was seen fewer than
+#   twice from there (gate_turn_views 2), and the scans held back still confirming the
+#   surfaces they hit (gate_confirm);
 # - the unanimous rule for cells observed fewer than T times (unanimous_min 3): corridors seen
 #   in passing, recordings that keep a scan a metre.
 # ``mapupdate run`` keeps the class's defaults (the paper's and its authors' code): its
@@ -49,7 +50,8 @@ ROBOT_UPDATER_DEFAULTS = {
     "grow_into_unknown": True,
     "gate_min_interval": 0.0, "gate_min_distance": 0.2, "gate_min_rotation_deg": 20.0,
     "gate_velocity_max_dt": 0.5, "gate_fast_turn_deg_s": 60.0, "gate_recovery_time": 0.5,
-    "gate_recovery_distance": 0.0, "gate_turn_cover": True, "gate_confirm": True,
+    "gate_recovery_distance": 0.0, "gate_turn_cover": True, "gate_turn_views": 2,
+    "gate_confirm": True,
     "unanimous_min": 3,
 }
 

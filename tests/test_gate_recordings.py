@@ -6,9 +6,12 @@ buffers again and again."""
 
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from gridmap import FREE, OCCUPIED, Pose2D
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS
@@ -57,31 +60,68 @@ def test_a_dense_fast_turn_still_holds_scans_back_briefly():
     assert resumed and resumed[0] * 0.1 <= 1.0 + ROBOT.gate_recovery_time + 0.5
 
 
-def test_turning_in_place_is_processed_until_the_headings_cover_the_circle():
-    # 20 deg/s in place at 10 Hz for two full turns, then 1 m straight on
+def turn_in_place(config, fov_deg):
+    """20 deg/s in place at 10 Hz for two full turns, then 1 m straight on: the reasons."""
     track = [(0.1 * k, Pose2D(0.0, 0.0, math.radians(2.0 * k))) for k in range(360)]
     track += [(36.0 + 0.1 * k, Pose2D(0.05 * k, 0.0, 0.0)) for k in range(1, 21)]
-    g, reasons = Gate(ROBOT), []
-    for t, pose in track:                            # a lidar of 180 deg
-        reason = g.check(t, pose, True, 180.0)
+    g, reasons = Gate(config), []
+    for t, pose in track:
+        reason = g.check(t, pose, True, fov_deg)
         if reason == "":
             g.mark_processed(t, pose)
         reasons.append(reason)
-    # a view each time the heading moved gate_min_rotation_deg (in steps of 2 deg), while
-    # 180 deg + one such turn are not yet swept
-    rot = ROBOT.gate_min_rotation_deg
+    return reasons
+
+
+def views_until_seen(views, fov_deg, step_deg=20.0, turn_deg=720.0):
+    """Reference: the views a robot turning in place in steps of ``step_deg`` takes while a
+    direction (to the degree) in its field was seen fewer than ``views`` times."""
+    seen = np.zeros(360, int)
+    taken = 0
+    for heading in np.arange(0.0, turn_deg, step_deg):
+        off = (np.arange(360) + 0.5 - heading + 180.0) % 360.0 - 180.0
+        field = np.abs(off) <= fov_deg / 2 if fov_deg < 360 else np.ones(360, bool)
+        if heading > 0 and seen[field].min() >= views:
+            continue
+        seen[field] += 1
+        taken += heading > 0
+    return taken
+
+
+@pytest.mark.parametrize("views", [1, 2, 3])
+def test_turning_in_place_is_processed_until_each_direction_was_seen_so_often(views):
+    config = replace(ROBOT, gate_turn_views=views)
+    reasons = turn_in_place(config, 180.0)           # a lidar of 180 deg
+    # a view each time the heading moved gate_min_rotation_deg (in steps of 2 deg, so 20 to
+    # 22 deg apart); the gate counts directions in bins of 10 deg, the reference to the degree
     turns = reasons[:360].count("") - 1
-    assert (180 + rot) / (rot + 2) - 1 <= turns <= (180 + rot) / rot
+    slow = views_until_seen(views, 180.0, ROBOT.gate_min_rotation_deg + 2.0)
+    fast = views_until_seen(views, 180.0, ROBOT.gate_min_rotation_deg)
+    assert slow - 1 <= turns <= fast + 1
     assert reasons.count(GATED_TURN_VIEWS) > 0
     assert reasons[360:].count("") >= 2              # moving again starts afresh
-    g = Gate(ROBOT)                                  # a lidar of 360 deg: no view from turning
-    g.check(0.0, Pose2D(0, 0, 0), True, 360.0)
-    g.mark_processed(0.0, Pose2D(0, 0, 0))
-    full = [g.check(0.1 * k, Pose2D(0, 0, math.radians(2.0 * k)), True, 360.0)
-            for k in range(1, 360)]
-    assert full.count("") == 0 and full.count(GATED_TURN_VIEWS) > 100
-    unlimited = run_gate(UpdaterConfig(gate_fast_turn_deg_s=3600.0), track)
+    # a lidar of 360 deg sees every direction in each view: views - 1 views from turning
+    full = turn_in_place(config, 360.0)
+    assert full[:360].count("") - 1 == views - 1 == views_until_seen(views, 360.0)
+    assert full[:360].count(GATED_TURN_VIEWS) > 300
+
+
+def test_turning_in_place_is_unbounded_without_the_rule():
+    unlimited = turn_in_place(UpdaterConfig(gate_fast_turn_deg_s=3600.0), 180.0)
     assert unlimited[:360].count("") == 1 + 2 * 360 // 45 - 1     # every 45 deg, twice round
+
+
+def test_a_saved_gate_keeps_its_views_of_each_direction(tmp_path):
+    g = Gate(ROBOT)
+    for k in range(4):                               # a place, then three turning views
+        pose = Pose2D(0.0, 0.0, math.radians(30.0 * k))
+        assert g.check(float(k), pose, True, 180.0) == ""
+        g.mark_processed(float(k), pose)
+    h = Gate(ROBOT)
+    h.restore(json.loads(json.dumps(g.state())))
+    assert np.array_equal(h.turn_views, g.turn_views) and h.turn_views.max() == 4
+    nxt = (4.0, Pose2D(0.0, 0.0, math.radians(120.0)), True, 180.0)
+    assert h.check(*nxt) == g.check(*nxt)
 
 
 def _stand_still(config, scans=60):

@@ -275,7 +275,8 @@ def edited_state(state: Path, path: Path, edit) -> Path:
     ("proc_t", math.nan, ("processed scan is part NaN", "proc_t=nan")),
     ("idle_t", math.inf, ("idle_t must be a finite number",)),
     ("travel", math.nan, ("travel must be a finite number",)),
-    ("turn_swept", -1.0, ("turn_swept must be >= 0",)),
+    ("turn_views", [1] * 35 + [-1], ("turn_views must be 36 whole numbers >= 0",)),
+    ("turn_views", [1.5] * 36, ("turn_views must be 36 whole numbers >= 0",)),
     ("idle", "yes", ("idle 'yes'",)),
 ])
 def test_a_state_whose_gate_is_not_finite_is_refused_in_one_line(room, state, tmp_path, capsys,

@@ -31,6 +31,7 @@ BOUNDS = {
     "gate_min_rotation_deg": (0.0, 360.0), "gate_fast_turn_deg_s": (1e-3, 3600.0),
     "gate_recovery_time": (0.0, 3600.0), "gate_recovery_distance": (0.0, 1000.0),
     "gate_velocity_window": (0.0, 60.0), "gate_velocity_max_dt": (0.0, 3600.0),
+    "gate_turn_views": (1, 100),
 "max_range": (1e-3, 100.0), "cast_margin": (0.0, 5.0),
     "virtual_to_measured_ratio": (1, 16), "window_deg": (0.0, 45.0),
     "pairing_distance_near": (1e-3, 5.0), "pairing_range_near": (0.0, 100.0),
@@ -59,10 +60,11 @@ class UpdaterConfig:
     gate_velocity_window: float = 0.3        # [s] without odometry: poses differenced over this
     # Not in the authors' code (gating.py): the angular velocity is judged only over pose
     # samples at most this far apart (3600: any), and with gate_turn_cover a robot turning
-    # without moving gets scans processed for its turning only until the headings seen from
-    # there cover the circle.
+    # without moving gets scans processed for its turning only while a direction they see has
+    # been seen fewer than gate_turn_views times from there.
     gate_velocity_max_dt: float = 3600.0     # [s]
     gate_turn_cover: bool = False
+    gate_turn_views: int = 1                 # views of each direction from one place
     # Not in the authors' code (MapUpdater._confirm): a scan held back as a view already
     # taken (too soon, no motion, turning in place) still gives its unchanged flags.
     gate_confirm: bool = False

@@ -10,11 +10,18 @@ smooth, differenced from scan to scan. Without odometry the localised poses are 
 over at least ``gate_velocity_window`` seconds: localised poses are noisy, and 0.5 deg of yaw
 noise at 10 Hz would already read as a fast turn. If the source changes (odometry given for some
 scans and not others), motion is measured afresh from the first pose of the new source.
+
+With ``gate_turn_cover`` (not in the authors' code), a scan that turned enough but did not move
+is processed only while some direction it sees has been seen fewer than ``gate_turn_views``
+times from this place (since the last scan processed for moving): a robot spinning in place
+looks round that many times, then holds its scans back as views already taken.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from gridmap import Pose2D, wrap_angle
 
@@ -36,7 +43,20 @@ CONFIRMING = frozenset({GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS})
 TIME_TOLERANCE = 1e-6
 
 _FIELDS = ("source", "last_t", "last_x", "last_y", "last_th", "proc_t", "proc_x", "proc_y",
-           "proc_th", "idle", "idle_t", "travel", "turn_swept")
+           "proc_th", "idle", "idle_t", "travel", "turn_views")
+# gate_turn_views counts the views of each direction from one place in bins of this many degrees
+DIRECTION_BIN_DEG = 10.0
+DIRECTION_BINS = int(round(360.0 / DIRECTION_BIN_DEG))
+
+
+def directions_seen(heading: float, fov_deg: float) -> np.ndarray:
+    """The direction bins (of ``DIRECTION_BIN_DEG``, from heading 0) whose centre a scan at
+    ``heading`` [rad] covering ``fov_deg`` about it sees: a bool array of ``DIRECTION_BINS``."""
+    if fov_deg >= 360.0:
+        return np.ones(DIRECTION_BINS, bool)
+    centres = (np.arange(DIRECTION_BINS) + 0.5) * DIRECTION_BIN_DEG
+    off = (centres - math.degrees(heading) + 180.0) % 360.0 - 180.0
+    return np.abs(off) <= fov_deg / 2.0
 
 
 class Gate:
@@ -57,10 +77,10 @@ class Gate:
         self.idle = False          # shut after a fast turn
         self.idle_t = math.nan     # time of the last fast turn
         self.travel = 0.0          # [m] travelled since then
-        self.turn_swept = 0.0      # [deg] turned by scans processed for turning alone, since
-                                   # the last one processed for moving
+        # views of each direction from the place of the last scan processed for moving
+        self.turn_views = np.zeros(DIRECTION_BINS, np.int64)
         self._by_turn = False      # the scan just let through was for turning alone ...
-        self._turn = 0.0           # [deg] ... by this much since the last processed
+        self._seen = np.ones(DIRECTION_BINS, bool)   # ... and saw these directions
 
     def check(self, t: float, pose: Pose2D, from_odometry: bool, fov_deg: float = 360.0) -> str:
         """"" when the scan at time ``t`` [s] may be processed, else why not. ``fov_deg``: the
@@ -76,13 +96,17 @@ class Gate:
             return GATED_TIME_BACK
         else:
             self._observe_motion(t, pose, from_odometry)
+        self._by_turn, self._seen = False, directions_seen(pose.theta, fov_deg)
         if math.isnan(self.proc_t):
             return ""
-        return self._reason(t, pose, fov_deg)
+        return self._reason(t, pose)
 
     def mark_processed(self, t: float, pose: Pose2D) -> None:
         self.proc_t, self.proc_x, self.proc_y, self.proc_th = t, pose.x, pose.y, pose.theta
-        self.turn_swept = self.turn_swept + self._turn if self._by_turn else 0.0
+        if self._by_turn:
+            self.turn_views = self.turn_views + self._seen
+        else:
+            self.turn_views = self._seen.astype(np.int64)
 
     def _sample(self, t, pose):
         self.last_t, self.last_x, self.last_y, self.last_th = t, pose.x, pose.y, pose.theta
@@ -100,7 +124,7 @@ class Gate:
             self.idle, self.idle_t, self.travel = True, t, 0.0
         self._sample(t, pose)
 
-    def _reason(self, t, pose, fov_deg):
+    def _reason(self, t, pose):
         cfg = self.config
         if self.idle:
             rested = t - self.idle_t >= cfg.gate_recovery_time - TIME_TOLERANCE
@@ -113,21 +137,28 @@ class Gate:
         moved = math.hypot(pose.x - self.proc_x, pose.y - self.proc_y) >= cfg.gate_min_distance
         turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))
         turned = turn >= cfg.gate_min_rotation_deg
-        self._by_turn, self._turn = turned and not moved, turn
-        circle = 360.0 - min(fov_deg, 360.0) + cfg.gate_min_rotation_deg
-        if self._by_turn and cfg.gate_turn_cover and self.turn_swept + turn > circle:
+        self._by_turn = turned and not moved
+        if self._by_turn and cfg.gate_turn_cover \
+                and self.turn_views[self._seen].min(initial=cfg.gate_turn_views) \
+                >= cfg.gate_turn_views:
             return GATED_TURN_VIEWS
         return "" if moved or turned else GATED_NO_MOTION
 
     # --- saving and restoring -----------------------------------------------------------------
     def state(self) -> dict:
-        return {name: getattr(self, name) for name in _FIELDS}
+        out = {name: getattr(self, name) for name in _FIELDS}
+        return out | {"turn_views": [int(v) for v in self.turn_views]}
 
     def restore(self, state: dict) -> None:
-        state = {"turn_swept": 0.0, **state}     # states saved before the rule had none
+        # states saved before the per-direction rule have none: no view counted yet
+        state = {"turn_views": [0] * DIRECTION_BINS, **state}
         missing = [name for name in _FIELDS if name not in state]
         if missing:
             raise ValueError(f"gate state lacks {missing}")
         for name in _FIELDS:
             value = state[name]
-            setattr(self, name, value if name in ("source", "idle") else float(value))
+            if name == "turn_views":
+                value = np.asarray(value, np.int64)
+            elif name not in ("source", "idle"):
+                value = float(value)
+            setattr(self, name, value)

@@ -49,7 +49,7 @@ from gridmap.files import FileInputError, check_regular_file
 
 from . import steps
 from .config import UpdaterConfig, UpdaterError
-from .gating import CONFIRMING, SKIPPED_OFF_MAP, Gate
+from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
 
 # 2: the buffers are saved as held, the flag counts above the flags when they fit there (a
 # ``seen`` array otherwise). 1 (still read): the buffers hold the flags alone, ``seen`` the
@@ -491,7 +491,7 @@ def _check_gate_state(path, gate) -> None:
     unmoved, so the next recording would process nothing and say only that it was gated."""
     if not isinstance(gate, dict):
         raise UpdaterError(f"{path}: the saved gate is not a mapping: {gate!r:.60}")
-    state = {"turn_swept": 0.0, **gate}     # states saved before the rule had none
+    state = dict(gate)
 
     def number(key, none_yet=True):
         value = state.get(key)
@@ -507,9 +507,14 @@ def _check_gate_state(path, gate) -> None:
         if any(nan) and not all(nan):
             raise UpdaterError(f"{path}: the saved gate's {name} scan is part NaN "
                                f"({', '.join(f'{k}={state[k]!r}' for k in keys)})")
-    for key in ("travel", "turn_swept"):
-        if number(key, none_yet=False) < 0:
-            raise UpdaterError(f"{path}: the saved gate's {key} must be >= 0, got {state[key]!r}")
+    if number("travel", none_yet=False) < 0:
+        raise UpdaterError(f"{path}: the saved gate's travel must be >= 0, got "
+                           f"{state['travel']!r}")
+    views = state.get("turn_views", [0] * DIRECTION_BINS)   # none in states saved before it
+    if not isinstance(views, list) or len(views) != DIRECTION_BINS or not all(
+            isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in views):
+        raise UpdaterError(f"{path}: the saved gate's turn_views must be {DIRECTION_BINS} "
+                           f"whole numbers >= 0, got {views!r:.60}")
     if not isinstance(state.get("idle"), bool) or state.get("source") not in (
             "", "odometry", "localised"):
         raise UpdaterError(f"{path}: the saved gate's idle {state.get('idle')!r:.20} or source "

@@ -50,6 +50,7 @@ from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 DATA = Path(__file__).resolve().parents[2] / "shared/data"
 LOGS = {"Intel": (DATA / "intel.gfs.log", 2), "Killian": (DATA / "killian.clf.gz", 3)}
 SPEEDUP_BAR = 2.0       # before / after, median per scan
+STATE_BAR = 16e6        # [bytes] the state of a 2000 x 2000 map, every configuration
 # A scan's own processor time, not the time it waited for a core: the machine is shared, and a
 # scan preempted halfway would count the other process's work.
 CLOCK = time.thread_time
@@ -397,6 +398,8 @@ def main() -> int:
     print_table(rows, parts, inner, mem, args.scans)
     missed_bar = any(r["ratio"] < SPEEDUP_BAR or not r["identical"]
                      for label, r in compared if not label.startswith("room, 1440"))
+    states = [mem["state_bytes"], *mem["other_states"].values()]
+    missed_bar = missed_bar or max(states) > STATE_BAR
     return int(missed_bar or any(r["median_ms"] > budget for _, _, budget, r in rows))
 
 

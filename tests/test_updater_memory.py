@@ -21,6 +21,7 @@ from gridmap import UNKNOWN, OccupancyGrid
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import MapUpdater, UpdaterConfig, UpdaterError, steps
 from updater import _kernels as K
+from updater.hit_tiles import HitTiles
 
 try:
     from test_updater_speedup import room_session, unknown_corner
@@ -70,6 +71,62 @@ def test_the_flag_counts_take_no_bytes_with_the_robots_defaults(session):
     robot = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
     uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0})
     assert state_after_scans(robot, session) == state_after_scans(uncounted, session)
+
+
+def test_a_2000_map_with_the_update_defaults_stays_within_16_mb(session):
+    """mapupdate update's defaults grow the map into the unknown: its hit buffers are made in
+    tiles where the scans hit open unknown space, not two bytes for every cell."""
+    ref, scans, _ = session
+    updater = MapUpdater(embedded(unknown_corner(ref), SIZE),
+                         UpdaterConfig(**ROBOT_UPDATER_DEFAULTS))
+    for scan, noisy, true in scans:
+        updater.process(scan, noisy, odometry=true)
+    assert updater._hits.used > 0 and len(updater.drawn_cells()[0]) > 0   # it grew
+    assert updater.state_bytes() <= BAR_BYTES
+
+
+def reference_hit_push(buffers, open_unknown, hits, changed, mask, threshold, few):
+    """The hit buffers' rule written out on a dense array: a 0 for each cell seen through
+    whose buffer holds something (and that is open unknown), then a 1 for each cell hit."""
+    for idx in changed:
+        if buffers[idx] and open_unknown[idx]:
+            buffers[idx] = (buffers[idx] << 1) & mask
+    for idx in hits:
+        buffers[idx] = ((buffers[idx] << 1) | 1) & mask
+    n = np.array([bin(int(b)).count("1") for b in buffers])
+    only_hits = np.array([(int(b) & (int(b) + 1)) == 0 for b in buffers])
+    return (n >= threshold) | ((n >= few) & only_hits)
+
+
+def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
+    rng = np.random.default_rng(3)
+    shape = (130, 200)                       # neither side a whole number of tiles
+    ref = rng.choice(np.array([UNKNOWN, 0, 100], np.int8), size=shape, p=[0.6, 0.3, 0.1])
+    cfg = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+    mask = steps.buffer_mask(cfg)
+    tiles = HitTiles(shape)
+    enclosed = np.zeros((ref.size + 7) // 8, np.uint8)
+    drawn, marks = np.zeros_like(enclosed), np.zeros_like(enclosed)
+    dense = np.zeros(ref.size, np.int64)
+    open_unknown = ref.reshape(-1) == UNKNOWN
+    ws = steps.Workspace()
+    # few cells, so that buffers fill and empty again; some in the last rows and columns
+    pick = np.concatenate([rng.choice(ref.size, 40, replace=False),
+                           ref.size - 1 - np.arange(5), np.arange(5) * shape[1] + shape[1] - 1])
+    for _ in range(60):
+        hits = np.unique(rng.choice(pick[open_unknown[pick]], 6))
+        seen = np.setdiff1d(np.unique(rng.choice(pick, 12)), hits)
+        ws.hits_unknown, ws.changed = hits.astype(np.int64), seen.astype(np.int64)
+        steps.push_hits(tiles, ref, enclosed, hits.size, seen.size, cfg, marks, drawn, ws)
+        want = reference_hit_push(dense, open_unknown, hits, seen, mask, cfg.threshold,
+                                  cfg.unanimous_min)
+        assert np.array_equal(tiles.dense().reshape(-1), dense)
+        bits = np.unpackbits(drawn, bitorder="little")[:ref.size].astype(bool)
+        assert np.array_equal(bits, want & (dense > 0))
+    assert tiles.used < tiles.directory.size            # not every tile was made
+    again = HitTiles(shape)
+    again.load_dense(tiles.dense())
+    assert np.array_equal(again.dense(), tiles.dense())
 
 
 @pytest.mark.parametrize("buffer_size, threshold", [(10, 7), (12, 12), (11, 8)])

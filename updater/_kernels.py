@@ -15,6 +15,7 @@ from numba.extending import intrinsic
 from gridmap._kernels import NO_HIT, find_root, first_hit, segment_start, traverse
 from gridmap.cells import FREE, OCCUPIED, UNKNOWN
 
+from .hit_tiles import TILE_SHIFT as HIT_TILE_SHIFT
 from .verdicts import BeamVerdict
 
 # The per-beam verdicts as plain ints, which numba compiles in as constants.
@@ -22,6 +23,7 @@ INVALID = int(BeamVerdict.INVALID)
 UNCHANGED = int(BeamVerdict.UNCHANGED)
 SKIPPED = int(BeamVerdict.SKIPPED)
 CHANGE = int(BeamVerdict.CHANGE)
+HIT_TILE_MASK = (1 << HIT_TILE_SHIFT) - 1
 
 
 # --- bits and counts --------------------------------------------------------------------------
@@ -653,25 +655,39 @@ def flag_listed_unchanged(cells, marks, out, n):
 
 
 @njit(cache=True)
-def push_hits(hitbuf, ref_flat, enclosed, hit_cells, changed, mask, threshold, few, hit_marks,
-              drawn):
-    """The hit buffers of open unknown cells, ``hitbuf = ((hitbuf << 1) | hit) & mask``: 1 for
-    each cell hit this scan, 0 for each seen through (its changed flag); then the ``drawn``
-    bit: hits in at least ``threshold`` of the last observations, or (``few`` > 0) only hits
-    since the first, at least ``few`` of them. Clears ``hit_marks``. Returns the change of
-    the number of drawn cells."""
+def hit_slot(directory, width, idx):
+    """(tile, offset) of flat cell ``idx`` in the hit buffers' pool (``hit_tiles.HitTiles``);
+    tile -1 where no tile was made (every buffer there is 0)."""
+    row = idx // width
+    col = idx - row * width
+    tile = directory[row >> HIT_TILE_SHIFT, col >> HIT_TILE_SHIFT]
+    return tile, ((row & HIT_TILE_MASK) << HIT_TILE_SHIFT) | (col & HIT_TILE_MASK)
+
+
+@njit(cache=True)
+def push_hits(directory, pool, width, ref_flat, enclosed, hit_cells, changed, mask, threshold,
+              few, hit_marks, drawn):
+    """The hit buffers of open unknown cells, ``hit = ((hit << 1) | flag) & mask`` (in the
+    tiles of ``directory`` and ``pool``; the hit cells' tiles exist): 1 for each cell hit
+    this scan, 0 for each seen through (its changed flag); then the ``drawn`` bit: hits in at
+    least ``threshold`` of the last observations, or (``few`` > 0) only hits since the first,
+    at least ``few`` of them. Clears ``hit_marks``. Returns the change of the number of drawn
+    cells."""
     delta = 0
     n_changed = changed.shape[0]
     for k in range(n_changed + hit_cells.shape[0]):
         if k < n_changed:
             idx, flag = changed[k], 0
-            if hitbuf[idx] == 0 or not is_open_unknown(ref_flat, enclosed, idx):
+            tile, off = hit_slot(directory, width, idx)
+            if tile < 0 or pool[tile, off] == 0 or not is_open_unknown(ref_flat, enclosed, idx):
                 continue            # a 0 into an empty buffer: no change
         else:
             idx, flag = hit_cells[k - n_changed], 1
+            tile, off = hit_slot(directory, width, idx)
             hit_marks[idx >> 3] = 0
-        hitbuf[idx] = ((hitbuf[idx] << 1) | flag) & mask
-        now = is_drawn(hitbuf[idx], mask, threshold, few)
+        h = ((pool[tile, off] << 1) | flag) & mask
+        pool[tile, off] = h
+        now = is_drawn(h, mask, threshold, few)
         if now != (bit_get(drawn, idx) == 1):
             drawn[idx >> 3] = drawn[idx >> 3] ^ (1 << (idx & 7))
             delta += 1 if now else -1
@@ -687,14 +703,27 @@ def is_drawn(h, mask, threshold, few):
 
 
 @njit(cache=True)
-def decide_drawn(hitbuf, ref_flat, enclosed, mask, threshold, few, drawn):
-    """The ``drawn`` bits over the whole map (on loading a saved state). Returns the count."""
+def decide_drawn(directory, pool, height, width, ref_flat, enclosed, mask, threshold, few,
+                 drawn):
+    """The ``drawn`` bits over every tile of hit buffers (on loading a saved state). Returns
+    the count."""
     total = 0
-    for idx in range(ref_flat.shape[0]):
-        if hitbuf[idx] and is_drawn(hitbuf[idx], mask, threshold, few) and \
-                is_open_unknown(ref_flat, enclosed, idx):
-            drawn[idx >> 3] = drawn[idx >> 3] | (1 << (idx & 7))
-            total += 1
+    side = 1 << HIT_TILE_SHIFT
+    for tr in range(directory.shape[0]):
+        for tc in range(directory.shape[1]):
+            tile = directory[tr, tc]
+            if tile < 0:
+                continue
+            for off in range(side * side):
+                row = (tr << HIT_TILE_SHIFT) + (off >> HIT_TILE_SHIFT)
+                col = (tc << HIT_TILE_SHIFT) + (off & HIT_TILE_MASK)
+                h = pool[tile, off]
+                if h == 0 or row >= height or col >= width:
+                    continue
+                idx = row * width + col
+                if is_drawn(h, mask, threshold, few) and is_open_unknown(ref_flat, enclosed, idx):
+                    drawn[idx >> 3] = drawn[idx >> 3] | (1 << (idx & 7))
+                    total += 1
     return total
 
 

@@ -12,7 +12,8 @@ flag counts        0 or 1          flags a cell ever got (saturating): above the
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan
-hit buffers        2               uint16 shift registers of hits in open unknown space
+hit buffers        2 where used    uint16 shift registers of hits in open unknown space, in
+                                   tiles of 64 x 64 cells made where a scan first hits it
 drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
 =================  ==============  ==========================================================
 
@@ -50,6 +51,7 @@ from gridmap.files import FileInputError, check_regular_file
 from . import steps
 from .config import UpdaterConfig, UpdaterError
 from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
+from .hit_tiles import HitTiles
 
 # 2: the buffers are saved as held, the flag counts above the flags when they fit there (a
 # ``seen`` array otherwise). 1 (still read): the buffers hold the flags alone, ``seen`` the
@@ -141,8 +143,7 @@ class MapUpdater:
         self._un_marks = np.zeros(n_bytes, np.uint8)
         self._enclosed = np.zeros(n_bytes, np.uint8)
         # growth into the unknown: hit buffers of open unknown cells, their drawn bits, marks
-        self._hitbuf = np.zeros(self._ref.shape if config.grow_into_unknown else (0, 0),
-                                np.uint16)
+        self._hits = HitTiles(self._ref.shape, config.grow_into_unknown)
         self._drawn = np.zeros(n_bytes, np.uint8)
         self._hit_marks = np.zeros(n_bytes if config.grow_into_unknown else 0, np.uint8)
         self._n_drawn = 0
@@ -211,7 +212,7 @@ class MapUpdater:
             self._enclosed, ws)
         self._push_and_decide(n_ch, n_un)
         if cfg.grow_into_unknown:
-            self._n_drawn += steps.push_hits(self._hitbuf.reshape(-1), ref, self._enclosed,
+            self._n_drawn += steps.push_hits(self._hits, ref, self._enclosed,
                                              n_hits, n_ch, cfg, self._hit_marks, self._drawn,
                                              ws)
         return n_ch, n_new, n_un
@@ -371,8 +372,8 @@ class MapUpdater:
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
         arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks,
-                  self._un_marks, self._enclosed, self._hitbuf, self._drawn, self._hit_marks)
-        return sum(a.nbytes for a in arrays) + self._ws.nbytes()
+                  self._un_marks, self._enclosed, self._drawn, self._hit_marks)
+        return sum(a.nbytes for a in arrays) + self._hits.nbytes + self._ws.nbytes()
 
     # --- stop and resume ----------------------------------------------------------------------
     def save(self, path) -> None:
@@ -384,7 +385,7 @@ class MapUpdater:
                 "gate": self._gate.state(), "counts": self._counts}
         buf = io.BytesIO()
         np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
-                            hist=self._hist, hits=self._hitbuf, seen=self._seen)
+                            hist=self._hist, hits=self._hits.dense(), seen=self._seen)
         try:
             write_atomically(path, buf.getvalue())
         except OSError as e:
@@ -398,14 +399,19 @@ class MapUpdater:
         come from ``seen``. A state saved before the flags were counted gives each cell with
         flags the most observations (so none of them is decided by few)."""
         mask = steps.buffer_mask(self.config)
-        for name, saved, into, bits in (("buffers", hist, self._hist, 0xFFFF if packed else mask),
-                                        ("hit buffers", hits, self._hitbuf, mask)):
-            if saved is None or (saved.size == 0 and into.size == 0):
+        hit_shape = self._ref.shape if self.config.grow_into_unknown else (0, 0)
+        for name, saved, shape, bits in (("buffers", hist, self._hist.shape,
+                                          0xFFFF if packed else mask),
+                                         ("hit buffers", hits, hit_shape, mask)):
+            if saved is None or (saved.size == 0 and shape == (0, 0)):
                 continue
-            if saved.shape != into.shape or saved.dtype != np.uint16 or \
+            if saved.shape != shape or saved.dtype != np.uint16 or \
                     np.any(saved & np.uint16(0xFFFF & ~bits)):
                 raise UpdaterError(f"{path}: {name} do not fit the reference map and config")
-            into[...] = saved
+        if hist is not None:
+            self._hist[...] = hist
+        if hits is not None and hits.size:
+            self._hits.load_dense(hits)
         if not packed:
             self._restore_counts(path, hist, seen)
         ref = self._ref.reshape(-1)
@@ -413,10 +419,8 @@ class MapUpdater:
                                                           self._seen.reshape(-1), ref,
                                                           self._ref.shape[1], self.config)
         if self.config.grow_into_unknown:
-            self._n_drawn = int(steps.kernels().decide_drawn(
-                self._hitbuf.reshape(-1), ref, self._enclosed, mask=np.uint16(mask),
-                threshold=self.config.threshold, few=self.config.unanimous_min,
-                drawn=self._drawn))
+            self._n_drawn = steps.decide_drawn(self._hits, self._ref, self._enclosed,
+                                               self.config, self._drawn)
 
     def _restore_counts(self, path, hist: np.ndarray, seen: np.ndarray | None) -> None:
         """The flag counts of a state whose buffers hold the flags alone (``seen``, or None

@@ -28,6 +28,7 @@ import numpy as np
 from gridmap import Scan
 
 from .config import UpdaterConfig
+from .hit_tiles import HitTiles
 
 
 @functools.cache
@@ -404,18 +405,29 @@ def release_unknown_hits(ch_marks: np.ndarray, un_marks: np.ndarray, n_hits: int
     return int(kernels().flag_listed_unchanged(cells, un_marks, ws.unchanged, n_un))
 
 
-def push_hits(hitbuf_flat: np.ndarray, ref: np.ndarray, enclosed: np.ndarray, n_hits: int,
+def push_hits(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, n_hits: int,
               n_changed: int, cfg: UpdaterConfig, hit_marks: np.ndarray, drawn: np.ndarray,
               ws: Workspace) -> int:
     """The hit buffers of open unknown cells, N_b flags as the change buffers: 1 for a scan
     that hit the cell, 0 for one that saw through it. A cell hit in T of its last N_b
     observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
     many) is drawn: occupied in the output. Returns the change of the drawn count."""
-    return int(kernels().push_hits(hitbuf_flat, ref.reshape(-1), enclosed,
-                                   hit_cells=ws.hits_unknown[:n_hits],
+    hit_cells = ws.hits_unknown[:n_hits]
+    tiles.ensure(hit_cells)
+    return int(kernels().push_hits(tiles.directory, tiles.pool, ref.shape[1], ref.reshape(-1),
+                                   enclosed, hit_cells=hit_cells,
                                    changed=ws.changed[:n_changed], mask=buffer_mask(cfg),
                                    threshold=cfg.threshold, few=cfg.unanimous_min,
                                    hit_marks=hit_marks, drawn=drawn))
+
+
+def decide_drawn(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, cfg: UpdaterConfig,
+                 drawn: np.ndarray) -> int:
+    """The drawn bits of every hit buffer (on loading a saved state). Returns the count."""
+    return int(kernels().decide_drawn(tiles.directory, tiles.pool, ref.shape[0], ref.shape[1],
+                                      ref.reshape(-1), enclosed,
+                                      mask=np.uint16(buffer_mask(cfg)), threshold=cfg.threshold,
+                                      few=cfg.unanimous_min, drawn=drawn))
 
 
 # --- steps 2 and 3 in one call ----------------------------------------------------------------

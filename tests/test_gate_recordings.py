@@ -17,7 +17,7 @@ from gridmap import FREE, OCCUPIED, Pose2D
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import MapUpdater, UpdaterConfig
 from updater.gating import (GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS,
-                            Gate)
+                            Gate, directions_seen)
 
 try:
     import synthetic_room as world
@@ -104,6 +104,13 @@ def test_turning_in_place_is_processed_until_each_direction_was_seen_so_often(vi
     full = turn_in_place(config, 360.0)
     assert full[:360].count("") - 1 == views - 1 == views_until_seen(views, 360.0)
     assert full[:360].count(GATED_TURN_VIEWS) > 300
+
+
+def test_a_narrow_scan_counts_the_direction_it_faces():
+    assert directions_seen(math.radians(-3.0), 4.0).nonzero()[0].tolist() == [35]
+    reasons = turn_in_place(ROBOT, 4.0)              # a 4 deg beam fan turning in place
+    # 720 deg in views of at least 20 deg, each bin of 10 deg seen twice at most
+    assert 2 <= reasons[:360].count("") - 1 <= 720 // 20
 
 
 def test_turning_in_place_is_unbounded_without_the_rule():

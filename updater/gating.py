@@ -47,16 +47,21 @@ _FIELDS = ("source", "last_t", "last_x", "last_y", "last_th", "proc_t", "proc_x"
 # gate_turn_views counts the views of each direction from one place in bins of this many degrees
 DIRECTION_BIN_DEG = 10.0
 DIRECTION_BINS = int(round(360.0 / DIRECTION_BIN_DEG))
+_CENTRES = (np.arange(DIRECTION_BINS) + 0.5) * DIRECTION_BIN_DEG
+_EVERY_DIRECTION = np.ones(DIRECTION_BINS, bool)
 
 
 def directions_seen(heading: float, fov_deg: float) -> np.ndarray:
     """The direction bins (of ``DIRECTION_BIN_DEG``, from heading 0) whose centre a scan at
-    ``heading`` [rad] covering ``fov_deg`` about it sees: a bool array of ``DIRECTION_BINS``."""
+    ``heading`` [rad] covering ``fov_deg`` about it sees, and always the bin of the heading
+    itself: a bool array of ``DIRECTION_BINS``."""
     if fov_deg >= 360.0:
         return np.ones(DIRECTION_BINS, bool)
-    centres = (np.arange(DIRECTION_BINS) + 0.5) * DIRECTION_BIN_DEG
-    off = (centres - math.degrees(heading) + 180.0) % 360.0 - 180.0
-    return np.abs(off) <= fov_deg / 2.0
+    degrees = math.degrees(heading)
+    off = (_CENTRES - degrees + 180.0) % 360.0 - 180.0
+    seen = np.abs(off) <= fov_deg / 2.0
+    seen[int(degrees % 360.0 // DIRECTION_BIN_DEG) % DIRECTION_BINS] = True
+    return seen
 
 
 class Gate:
@@ -96,7 +101,9 @@ class Gate:
             return GATED_TIME_BACK
         else:
             self._observe_motion(t, pose, from_odometry)
-        self._by_turn, self._seen = False, directions_seen(pose.theta, fov_deg)
+        self._by_turn = False
+        self._seen = directions_seen(pose.theta, fov_deg) if self.config.gate_turn_cover \
+            else _EVERY_DIRECTION
         if math.isnan(self.proc_t):
             return ""
         return self._reason(t, pose)

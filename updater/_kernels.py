@@ -740,7 +740,8 @@ def apply_drawn(drawn, out):
 
 # --- steps 2 and 3 in one call ----------------------------------------------------------------
 @njit(cache=True)
-def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_reach, tol, free_reach,
+def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_select, removed_reach, tol,
+              free_reach,
               expected, directions, found, guard, unknown_guard, grow, short, gaps, margin,
               confirm, cap, ch_marks, un_marks, hit_marks, protected, hits_unknown, into,
               unknown_reach, changed, unchanged):
@@ -759,7 +760,7 @@ def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_reach, tol, 
                                        ch_marks, protected)
     n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
                                hits_unknown) if grow else 0
-    n = walk_beams(ref, ch_marks, sensor, hits, removed_reach, select=verdict, want=CHANGE,
+    n = walk_beams(ref, ch_marks, sensor, hits, removed_reach, select=removed_select, want=CHANGE,
                    drop_last=True, cap=cap, kind=WALK_BLOCKED, marks=ch_marks, out=changed, n=0)
     n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n)
     n_new = n_ch - n

@@ -105,6 +105,11 @@ class UpdaterConfig:
     # become free by their changed flags, cells hit become occupied by hit buffers of N_b flags
     # and the threshold T. Without it, a partly mapped place stays as unknown as M had it.
     grow_into_unknown: bool = False          # on in mapupdate update and the ROS node
+    # Not in the paper (steps.removed_select): a beam skipped beside a kept change (within
+    # n_skip of it) also walks for removed obstacles: the occupied cells of M it passes through
+    # before p_th get changed flags. Such a beam pairs, within the window, with a point past
+    # the object, so the paper gives the sides of a removed object no flag from it.
+    walk_skipped_beams: bool = False
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
@@ -129,7 +134,7 @@ class UpdaterConfig:
     def __post_init__(self):
         for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
                      "last_check", "fill_gaps",
-                     "grow_into_unknown", "confirm_hit_surfaces"):
+                     "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")

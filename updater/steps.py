@@ -29,6 +29,9 @@ from gridmap import Scan
 
 from .config import UpdaterConfig
 from .hit_tiles import HitTiles
+from .verdicts import BeamVerdict
+
+SKIPPED, CHANGE = int(BeamVerdict.SKIPPED), int(BeamVerdict.CHANGE)
 
 
 @functools.cache
@@ -449,7 +452,8 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
     n_ch, n_new, n_gaps, n_un, n_hits = kernels().flag_scan(
         ref, enclosed, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
-        verdict=beams.verdict, removed_reach=removed_reach(beams), tol=beams.tol,
+        verdict=beams.verdict, removed_select=removed_select(beams, cfg),
+        removed_reach=removed_reach(beams), tol=beams.tol,
         free_reach=beams.free_reach, expected=beams.own_expected,
         directions=beams.own_direction, found=beams.own_found, guard=guard,
         unknown_guard=unknown_guard(cfg, res), grow=cfg.grow_into_unknown,
@@ -459,6 +463,14 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
         hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
         changed=ws.changed, unchanged=ws.unchanged)
     return int(n_ch), int(n_new + n_gaps), int(n_un), int(n_hits)
+
+
+def removed_select(beams: Beams, cfg: UpdaterConfig) -> np.ndarray:
+    """The beams whose removed-obstacle walk runs: those whose verdict is CHANGE in the array
+    returned. With ``walk_skipped_beams`` the skipped beams beside a kept change walk too."""
+    if not cfg.walk_skipped_beams:
+        return beams.verdict
+    return np.where(beams.verdict == SKIPPED, np.int8(CHANGE), beams.verdict)
 
 
 def removed_reach(beams: Beams) -> np.ndarray:

@@ -108,7 +108,8 @@ class UpdaterConfig:
     # Not in the paper (steps.removed_select): a beam skipped beside a kept change (within
     # n_skip of it) also walks for removed obstacles: the occupied cells of M it passes through
     # before p_th get changed flags. Such a beam pairs, within the window, with a point past
-    # the object, so the paper gives the sides of a removed object no flag from it.
+    # the object, so the paper gives the sides of a removed object no flag from it. Off in
+    # every default: with pose noise the same walks wear the edges of walls.
     walk_skipped_beams: bool = False
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change

@@ -299,6 +299,51 @@ def ref_walk(data, sensor, hit, reach, drop_last):
     return cells
 
 
+def reference_runs(change, hits, min_run, min_width, wrap):
+    """Which changes the run filter keeps, written out: split the beams into maximal runs of
+    changes (joined across the ends when ``wrap``), keep a run of min_run or more, or of two
+    or more whose end hits lie min_width apart (min_width > 0)."""
+    n = len(change)
+    runs, current = [], []
+    for i in range(n):
+        if change[i]:
+            current.append(i)
+        elif current:
+            runs.append(current)
+            current = []
+    if current:
+        runs.append(current)
+    if wrap and len(runs) > 1 and runs[0][0] == 0 and runs[-1][-1] == n - 1:
+        runs = [runs[-1] + runs[0]] + runs[1:-1]
+    keep = np.zeros(n, bool)
+    for run in runs:
+        span = math.dist(hits[run[0]], hits[run[-1]])
+        if len(run) >= min_run or (min_width > 0 and len(run) >= 2 and span >= min_width):
+            keep[run] = True
+    return keep
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_run_filter_against_reference(seed):
+    rng = np.random.default_rng(seed)
+    n = 90
+    change = rng.random(n) < 0.45
+    hits = np.cumsum(rng.uniform(0.5, 4.0, (n, 2)), axis=0)     # cells apart, beam to beam
+    for min_run, min_width, wrap in ((3, 0.0, False), (3, 4.0, False), (3, 4.0, True),
+                                     (4, 9.0, True), (1, 0.0, True)):
+        keep = np.zeros(n, np.bool_)
+        kept = K.run_filter(change, min_run, wrap, keep, hits, min_width)
+        want = reference_runs(change, hits, min_run, min_width, wrap)
+        assert np.array_equal(keep, want) and kept == want.sum()
+    # a run of two kept for its width only: the width test is what keeps it
+    two = np.zeros(n, np.bool_)
+    two[10:12] = True
+    assert K.run_filter(two, 3, False, np.zeros(n, np.bool_), hits, 0.0) == 0
+    wide = math.dist(hits[10], hits[11])
+    assert K.run_filter(two, 3, False, np.zeros(n, np.bool_), hits, wide) == 2
+    assert K.run_filter(two, 3, False, np.zeros(n, np.bool_), hits, wide * 1.01) == 0
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_walk_against_reference(seed):
     rng = np.random.default_rng(seed)

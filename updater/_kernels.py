@@ -8,6 +8,8 @@ are addressed by their flat index ``row * width + col``. Per-scan marks and the 
 are bit planes: one bit per cell, packed eight to a byte (``bits[idx >> 3] >> (idx & 7)``).
 """
 
+import math
+
 import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
@@ -177,10 +179,11 @@ def classify(hits, valid, pairing, expected, found, half_window, wrap, out_chang
 
 
 @njit(cache=True)
-def run_filter(change, min_run, wrap, out_keep):
+def run_filter(change, min_run, wrap, out_keep, hits, min_width=0.0):
     """Keep a change only inside a run of at least ``min_run`` consecutive changes (a beam that
-    is not a change, invalid ones included, ends a run). With ``wrap`` a run may cross the
-    scan's ends. Returns the count kept."""
+    is not a change, invalid ones included, ends a run), or, with ``min_width`` > 0 [cells],
+    of at least two whose first and last ``hits`` lie that far apart. With ``wrap`` a run may
+    cross the scan's ends. Returns the count kept."""
     n = change.shape[0]
     out_keep[:] = False
     start = 0
@@ -191,7 +194,7 @@ def run_filter(change, min_run, wrap, out_keep):
                 start = i + 1   # begin after a non-change, so no run is cut at the ends
                 break
         if start < 0:           # every beam is a change: one run around the circle
-            if n >= min_run:
+            if n >= min_run or (min_width > 0.0 and n >= 2):
                 out_keep[:] = True
                 return n
             return 0
@@ -201,7 +204,11 @@ def run_filter(change, min_run, wrap, out_keep):
         if k < n and change[(start + k) % n]:
             run += 1
             continue
-        if run >= min_run:
+        wide = False
+        if min_width > 0.0 and 2 <= run < min_run:
+            a, b = (start + k - run) % n, (start + k - 1) % n
+            wide = math.hypot(hits[a, 0] - hits[b, 0], hits[a, 1] - hits[b, 1]) >= min_width
+        if run >= min_run or wide:
             for q in range(k - run, k):
                 out_keep[(start + q) % n] = True
             kept += run
@@ -276,12 +283,13 @@ def prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio,
 
 @njit(cache=True)
 def classify_scan(ref, sensor, virtual, max_len, hits, valid, pairing, half_window, wrap,
-                  min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict):
+                  min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict,
+                  min_width=0.0):
     """``cast_virtual``, ``classify``, ``run_filter`` and ``beam_verdicts`` in one call.
     Returns (detected changes, changes kept by the run filter)."""
     cast_virtual(ref, sensor, virtual, max_len, out_expected, out_found)
     raw = classify(hits, valid, pairing, out_expected, out_found, half_window, wrap, out_change)
-    kept = run_filter(out_change, min_run, wrap, out_keep)
+    kept = run_filter(out_change, min_run, wrap, out_keep, hits, min_width)
     beam_verdicts(valid, out_keep, n_skip, wrap, out_verdict)
     return raw, kept
 

@@ -185,7 +185,7 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
         ref, sensor, virtual=ws.virtual, max_len=max_len, hits=ws.hits, valid=ws.valid,
         pairing=ws.pairing, half_window=half, wrap=wrap, min_run=cfg.min_run,
         n_skip=cfg.n_skip, out_expected=ws.expected, out_found=ws.found, out_change=ws.change,
-        out_keep=ws.keep, out_verdict=ws.verdict)
+        out_keep=ws.keep, out_verdict=ws.verdict, min_width=cfg.min_run_width / res)
     # No evaluator can flag more cells than the bound or the map holds; the n more leave room
     # for an unchanged flag at each beam's hit cell.
     ws.for_flags(min(bound, ref.size) + n)

@@ -127,8 +127,7 @@ def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
         bits = np.unpackbits(drawn, bitorder="little")[:ref.size].astype(bool)
         assert np.array_equal(bits, want & (dense > 0))
     assert tiles.used < tiles.directory.size            # not every tile was made
-    again = HitTiles(shape)
-    again.load_dense(tiles.dense())
+    again = HitTiles.from_dense(tiles.dense())
     assert np.array_equal(again.dense(), tiles.dense())
 
 

@@ -673,6 +673,21 @@ def hit_slot(directory, width, idx):
 
 
 @njit(cache=True)
+def missing_hit_tiles(directory, width, cells, out):
+    """The tiles (flat index into ``directory``) of ``cells`` that have none yet, into
+    ``out``, repeats and all. Returns the count."""
+    n = 0
+    for k in range(cells.shape[0]):
+        row = cells[k] // width
+        col = cells[k] - row * width
+        tr, tc = row >> HIT_TILE_SHIFT, col >> HIT_TILE_SHIFT
+        if directory[tr, tc] < 0:
+            out[n] = tr * directory.shape[1] + tc
+            n += 1
+    return n
+
+
+@njit(cache=True)
 def push_hits(directory, pool, width, ref_flat, enclosed, hit_cells, changed, mask, threshold,
               few, hit_marks, drawn):
     """The hit buffers of open unknown cells, ``hit = ((hit << 1) | flag) & mask`` (in the

@@ -56,7 +56,7 @@ def directions_seen(heading: float, fov_deg: float) -> np.ndarray:
     ``heading`` [rad] covering ``fov_deg`` about it sees, and always the bin of the heading
     itself: a bool array of ``DIRECTION_BINS``."""
     if fov_deg >= 360.0:
-        return np.ones(DIRECTION_BINS, bool)
+        return _EVERY_DIRECTION
     degrees = math.degrees(heading)
     off = (_CENTRES - degrees + 180.0) % 360.0 - 180.0
     seen = np.abs(off) <= fov_deg / 2.0

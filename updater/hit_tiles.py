@@ -39,9 +39,13 @@ class HitTiles:
             return
         width = self.shape[1]
         rows, cols = cells // width, cells % width
-        tiles = np.unique((rows >> TILE_SHIFT) * self.directory.shape[1] + (cols >> TILE_SHIFT))
+        self.make((rows >> TILE_SHIFT) * self.directory.shape[1] + (cols >> TILE_SHIFT))
+
+    def make(self, tiles: np.ndarray) -> None:
+        """Make the ``tiles`` (flat indices into the directory, repeats allowed) there are not
+        yet."""
         flat = self.directory.reshape(-1)
-        missing = tiles[flat[tiles] < 0]
+        missing = np.unique(tiles[flat[tiles] < 0])
         if missing.size == 0:
             return
         need = self.used + missing.size
@@ -65,13 +69,15 @@ class HitTiles:
                 self.pool[self.directory[tr, tc]].reshape(side, side)
         return out[:height, :width]
 
-    def load_dense(self, buffers: np.ndarray) -> None:
-        """Take (H, W) buffers: a tile for each 64 x 64 block holding a non-zero buffer."""
-        self.__init__(self.shape, self.directory.size > 0)
-        self.ensure(np.flatnonzero(buffers))
+    @classmethod
+    def from_dense(cls, buffers: np.ndarray) -> HitTiles:
+        """Tiles of (H, W) buffers: one for each 64 x 64 block holding a non-zero buffer."""
+        tiles = cls(buffers.shape)
+        tiles.ensure(np.flatnonzero(buffers))
         side = 1 << TILE_SHIFT
-        for tr, tc in zip(*np.nonzero(self.directory >= 0)):
+        for tr, tc in zip(*np.nonzero(tiles.directory >= 0)):
             block = buffers[tr * side:(tr + 1) * side, tc * side:(tc + 1) * side]
             tile = np.zeros((side, side), np.uint16)
             tile[:block.shape[0], :block.shape[1]] = block
-            self.pool[self.directory[tr, tc]] = tile.reshape(-1)
+            tiles.pool[tiles.directory[tr, tc]] = tile.reshape(-1)
+        return tiles

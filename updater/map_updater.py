@@ -411,7 +411,7 @@ class MapUpdater:
         if hist is not None:
             self._hist[...] = hist
         if hits is not None and hits.size:
-            self._hits.load_dense(hits)
+            self._hits = HitTiles.from_dense(hits)
         if not packed:
             self._restore_counts(path, hist, seen)
         ref = self._ref.reshape(-1)

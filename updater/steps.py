@@ -416,7 +416,11 @@ def push_hits(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, n_hits: in
     observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
     many) is drawn: occupied in the output. Returns the change of the drawn count."""
     hit_cells = ws.hits_unknown[:n_hits]
-    tiles.ensure(hit_cells)
+    # the tiles of the cells hit: checked in a kernel, made (rarely) in NumPy
+    missing = np.empty(n_hits, np.int64)
+    n_missing = kernels().missing_hit_tiles(tiles.directory, ref.shape[1], hit_cells, missing)
+    if n_missing:
+        tiles.make(missing[:n_missing])
     return int(kernels().push_hits(tiles.directory, tiles.pool, ref.shape[1], ref.reshape(-1),
                                    enclosed, hit_cells=hit_cells,
                                    changed=ws.changed[:n_changed], mask=buffer_mask(cfg),

@@ -245,9 +245,10 @@ def figure(rows, k, path: Path) -> None:
         ax.set_title("removed boxes: seen outline freed" if what == "freed"
                      else "added boxes: seen outline drawn")
         ax.set_ylim(0, 1.05)
-    axes[0].legend(fontsize=8, loc="lower left")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(methods), fontsize=8)
     fig.suptitle("Real scans, edited world: 7 buildings x 3 seeds x (0, 4 people), pooled")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(path, dpi=90)
 
 

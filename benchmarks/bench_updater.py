@@ -287,8 +287,10 @@ def log_calls(path: Path, parts: int, tmp: Path):
                         Outputs(tmp / "updated.yaml"))
     finally:
         MapUpdater.process = plain_process
-    # the run filter by width came after the code kept from before, which cannot run it
-    return first, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0}), calls
+    # the run filter by width and the spread of freed objects came after the code kept from
+    # before, which cannot run them
+    return first, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0,
+                                   "spread_removed": False}), calls
 
 
 def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, dict]]:

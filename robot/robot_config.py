@@ -45,7 +45,9 @@ from updater import UpdaterConfig
 # - the unanimous rule for cells observed fewer than T times (unanimous_min 3): corridors seen
 #   in passing, recordings that keep a scan a metre;
 # - the run filter by width as well as by beams (min_run_width 0.2 m): a lidar of 1 deg steps
-#   needs 0.28 m of face at 8 m for 3 beams, so far objects were dropped as thin ones.
+#   needs 0.28 m of face at 8 m for 3 beams, so far objects were dropped as thin ones;
+# - a removed object freed as a whole (spread_removed): the sides of a box that a sparse
+#   recording sees through once or twice go with the rest of it.
 # ``mapupdate run`` keeps the class's defaults (the paper's and its authors' code): its
 # figures are the paper's method's.
 ROBOT_UPDATER_DEFAULTS = {
@@ -54,7 +56,7 @@ ROBOT_UPDATER_DEFAULTS = {
     "gate_velocity_max_dt": 0.5, "gate_fast_turn_deg_s": 60.0, "gate_recovery_time": 0.5,
     "gate_recovery_distance": 0.0, "gate_turn_cover": True, "gate_turn_views": 2,
     "gate_confirm": True,
-    "unanimous_min": 3, "min_run_width": 0.2,
+    "unanimous_min": 3, "min_run_width": 0.2, "spread_removed": True,
 }
 
 # The sections of the file and the configuration each holds.

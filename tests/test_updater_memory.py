@@ -33,8 +33,8 @@ from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 
 BAR_BYTES = 16e6
 # update's defaults as the code kept in benchmarks/updater_before can run them: it has no run
-# filter by width
-ROBOT_AS_BEFORE = {**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0}
+# filter by width and no spread of freed objects
+ROBOT_AS_BEFORE = {**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0, "spread_removed": False}
 SIZE = 2000
 
 
@@ -72,7 +72,8 @@ def test_the_flag_counts_take_no_bytes_with_the_robots_defaults(session):
     """With the growth into the unknown, its hit buffers (two bytes a cell) come on top: the
     counts add nothing to them."""
     robot = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
-    uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0})
+    uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0,
+                                 "spread_removed": False})
     assert state_after_scans(robot, session) == state_after_scans(uncounted, session)
 
 

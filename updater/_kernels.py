@@ -1043,6 +1043,65 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out, mask=0xFFFF):
     return closed
 
 
+@njit(cache=True)
+def spread_freed(ref, decided, hist, seen, width, mask, shift, spread):
+    """A removed object freed as a whole: from each occupied cell of ``ref`` that the rule
+    changed, across the 8-neighbours occupied in ``ref`` whose every recent flag says changed
+    (one at least) and that lie beside no ``confirmed`` cell, marked in ``spread`` (bits, all
+    clear) and spread on from. Returns the count marked."""
+    size = ref.shape[0]
+    height = size // width
+    window = popcount16(mask)
+    stack = np.empty(256, np.int64)
+    top = 0
+    marked = 0
+    for b in range(decided.shape[0]):
+        if decided[b] == 0:
+            continue
+        for idx in range(b * 8, min(b * 8 + 8, size)):
+            if bit_get(decided, idx) and ref[idx] == OCCUPIED:
+                stack, top = _push(stack, top, idx)
+    while top > 0:
+        top -= 1
+        idx = stack[top]
+        row, col = idx // width, idx % width
+        for rr in range(max(row - 1, 0), min(row + 2, height)):
+            for cc in range(max(col - 1, 0), min(col + 2, width)):
+                j = rr * width + cc
+                if ref[j] != OCCUPIED or bit_get(decided, j) or bit_get(spread, j):
+                    continue
+                seen_n = flag_count(hist, seen, j, shift)
+                if seen_n == 0 or popcount16(hist[j] & mask) < min(seen_n, window):
+                    continue
+                if _beside_confirmed(hist, seen, ref, j, width, height, mask, shift):
+                    continue
+                spread[j >> 3] |= np.uint8(1 << (j & 7))
+                marked += 1
+                stack, top = _push(stack, top, j)
+    return marked
+
+
+@njit(cache=True, inline="always")
+def _push(stack, top, idx):
+    if top == stack.shape[0]:
+        grown = np.empty(2 * top, np.int64)
+        grown[:top] = stack
+        stack = grown
+    stack[top] = idx
+    return stack, top + 1
+
+
+@njit(cache=True, inline="always")
+def _beside_confirmed(hist, seen, ref, idx, width, height, mask, shift):
+    row, col = idx // width, idx % width
+    for rr in range(max(row - 1, 0), min(row + 2, height)):
+        for cc in range(max(col - 1, 0), min(col + 2, width)):
+            j = rr * width + cc
+            if j != idx and confirmed(hist, seen, ref, j, mask, shift):
+                return True
+    return False
+
+
 # --- enclosed unknown regions of the reference map (once per map) -----------------------------
 @njit(cache=True)
 def unknown_runs(ref, out_runs):

@@ -132,6 +132,11 @@ class UpdaterConfig:
     # a recording that keeps a scan a metre) is changed when every one of its flags says
     # changed and there are at least this many. A later contrary flag undoes it. 0: off.
     unanimous_min: int = 0
+    # Not in the paper (steps.spread_freed): a removed object is freed as a whole. An occupied
+    # cell of M next to one the rule freed (or to one freed this way), every flag of which says
+    # changed, is freed too, however few its flags, unless it lies beside a surface the scans
+    # still see. Needs the flag counts (unanimous_min > 0). Applied to the output map.
+    spread_removed: bool = False
     # --- Last check ---------------------------------------------------------------------------
     last_check: bool = True
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
@@ -139,7 +144,8 @@ class UpdaterConfig:
     def __post_init__(self):
         for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
                      "last_check", "fill_gaps",
-                     "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams"):
+                     "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams",
+                     "spread_removed"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")
@@ -147,6 +153,9 @@ class UpdaterConfig:
         if self.threshold > self.buffer_size:
             raise UpdaterError(f"config key 'threshold' ({self.threshold}) exceeds "
                                f"'buffer_size' ({self.buffer_size}): no cell could ever change")
+        if self.spread_removed and not self.unanimous_min:
+            raise UpdaterError("config key 'spread_removed' needs the flag counts: set "
+                               "'unanimous_min' above 0")
 
     # --- the range-dependent distances of docs/algorithm.md [m], for a range or an array of them
     def pairing_distance(self, r):

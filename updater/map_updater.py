@@ -304,10 +304,18 @@ class MapUpdater:
         """M with the changed cells flipped and the last check applied (O(map); on demand)."""
         # with the unanimous rule, interiors seen through are not closed (docs/real_changes.md)
         spare = self._hist if self.config.unanimous_min else None
-        cells, _ = steps.close_outlines(self._ref, self._decided, self._enclosed,
+        cells, _ = steps.close_outlines(self._ref, self._output_bits(), self._enclosed,
                                         self.config.last_check, self._drawn, spare,
                                         steps.buffer_mask(self.config))
         return OccupancyGrid(cells, self._res, self._origin)
+
+    def _output_bits(self) -> np.ndarray:
+        """The decided bits, with the cells freed with their objects (``spread_removed``)."""
+        if not self.config.spread_removed:
+            return self._decided
+        return self._decided | steps.spread_freed(self._hist.reshape(-1), self._seen.reshape(-1),
+                                                  self._ref.reshape(-1), self._decided,
+                                                  self._ref.shape[1], self.config)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the cells the decision rule marks changed, in row-major order.
@@ -340,11 +348,12 @@ class MapUpdater:
         mask, shift = np.uint16(steps.buffer_mask(self.config)), steps.count_shift(self.config)
         counted = bool(self.config.unanimous_min)
         hist, seen = self._hist.reshape(-1), self._seen.reshape(-1)
+        output = self._output_bits()
         n_pending = n_few = 0
         # in blocks: temporaries the size of a large map would outweigh the state itself
         for lo in range(0, hist.size, _SUMMARY_BLOCK):
             hi = min(lo + _SUMMARY_BLOCK, hist.size)
-            bits = np.unpackbits(self._decided[lo >> 3:(hi + 7) >> 3], bitorder="little")
+            bits = np.unpackbits(output[lo >> 3:(hi + 7) >> 3], bitorder="little")
             pending = ((hist[lo:hi] & mask) != 0) & (bits[:hi - lo] == 0)
             n_pending += int(pending.sum())
             if counted:

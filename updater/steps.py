@@ -557,6 +557,19 @@ def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
 
 
 # --- output and last check --------------------------------------------------------------------
+def spread_freed(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+                 decided: np.ndarray, width: int, cfg: UpdaterConfig) -> np.ndarray:
+    """Bits of the cells freed with the object they belong to (``cfg.spread_removed``): the
+    occupied cells of M, connected through each other to one the rule freed, whose every
+    flag says changed (one flag at least: a side of a box seen once or twice) and that lie
+    beside no surface the scans still see. Empty bits when the rule is off."""
+    spread = np.zeros_like(decided)
+    if cfg.spread_removed:
+        kernels().spread_freed(ref_flat, decided, hist_flat, seen_flat, width=width,
+                               mask=buffer_mask(cfg), shift=count_shift(cfg), spread=spread)
+    return spread
+
+
 def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
                    last_check: bool, drawn: np.ndarray | None = None,
                    seen_through: np.ndarray | None = None,

@@ -14,13 +14,15 @@ cell, ended on an added box's cell) and on those seen by 3 scans or more.
 
 Then the partly mapped places: per log, a map of its first 45 % of scans updated with the rest
 by ``mapupdate update``'s defaults; of the formerly unknown cells the rest observes 7 times or
-more (and the whole log's map knows), the share known and right, and the cells occupied in both
-maps that the update freed (``evaluation.growth_scores``).
+more (and the whole log's map knows), the share known and right, the cells occupied in both
+maps that the update freed, and of them the walls: cells of a structure of the whole map (an
+occupied 8-neighbour there) that the rest of the log still hits (``evaluation.growth_scores``).
 
     python benchmarks/bench_real_changes.py --out runs/real_changes [--seeds 0 1 2] [--logs aces]
 
 Exit 1 when a bar of the real-change issue is missed (pooled freed >= 0.95 and drawn >= 0.85,
-no log below 0.8 and 0.5, no case with more false occupied or wall cells than ungated).
+no log below 0.8 and 0.5, no case with more false occupied or wall cells than ungated;
+partly mapped: >= 0.80 known and right on each log, no wall freed).
 """
 
 from __future__ import annotations
@@ -126,7 +128,7 @@ def partly_mapped(job):
     (written as a log of its own, so that logs with broken times split by scan order)."""
     import gzip
 
-    from evaluation.scores import growth_scores, observed_counts
+    from evaluation.scores import growth_scores, observed_counts, scan_hit_counts
     from gridmap import load_map, save_map
     from gridmap.mapping import build_map
     from robotlogs.carmen import read_carmen
@@ -147,22 +149,26 @@ def partly_mapped(job):
     cfg = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
     s = update_from_log(work / f"{name}-part.yaml", LogSource(work / f"{name}-rest.log"),
                         Outputs(work / f"{name}-grown.yaml"), updater_config=cfg)
-    counts = observed_counts(before, [(r.scan, r.laser_pose) for r in scans[cut:]],
-                             cfg.max_range)
-    g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole, counts)
+    rest = [(r.scan, r.laser_pose) for r in scans[cut:]]
+    g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole,
+                      observed_counts(before, rest, cfg.max_range),
+                      hits=scan_hit_counts(before, rest, cfg.max_range))
     return {"log": name, "scans": len(scans) - cut, "processed": s["scans_processed"], **g}
 
 
 def report_grown(grown) -> int:
     print(f"\npartly mapped: a map of the first {PART:.0%} of each log updated with the rest")
     print("| log | scans | processed | newly seen cells (7+ views) | known | known and right "
-          "| surfaces drawn | occupied cells freed | of them occupied in the whole map |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| surfaces drawn | occupied cells freed | of them occupied in the whole map "
+          "| of them walls |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for g in grown:
         print(f"| {g['log']} | {g['scans']} | {g['processed']} | {g['cells']} | "
               f"{g['known']:.3f} | {g['agreeing']:.3f} | {g['surfaces_drawn']:.3f} | "
-              f"{g['freed']} | {g['freed_also_in_whole']} |")
-    ok = all(g["agreeing"] >= 0.8 and g["freed_also_in_whole"] == 0 for g in grown)
+              f"{g['freed']} | {g['freed_also_in_whole']} | {g['walls_freed']} |")
+    print("walls: cells of a structure of the whole map (an occupied 8-neighbour there) that the "
+          "rest of the log still hits")
+    ok = all(g["agreeing"] >= 0.8 and g["walls_freed"] == 0 for g in grown)
     print(f"partly mapped bars (>= 0.80 known and right on each log, no wall freed) "
           f"{'met' if ok else 'missed'}")
     return 0 if ok else 1

@@ -78,6 +78,22 @@ def observed_counts(frame: OccupancyGrid, placed, max_range: float) -> np.ndarra
     return counter.counts
 
 
+def scan_hit_counts(frame: OccupancyGrid, placed, max_range: float) -> np.ndarray:
+    """Per cell of ``frame``, how many of the scans ``placed`` ((scan, sensor pose) pairs) have
+    a valid beam (as ``observed_counts`` takes them) ending in it."""
+    counts = np.zeros(frame.data.size, np.int32)
+    for scan, sensor in placed:
+        r = scan.ranges.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r >= scan.range_min) & (r < min(scan.range_max, max_range))
+        a = scan.angles()[valid] + sensor.theta
+        rows, cols = frame.world_to_cell(sensor.x + r[valid] * np.cos(a),
+                                         sensor.y + r[valid] * np.sin(a))
+        inside = frame.contains(rows, cols)
+        counts[np.unique(rows[inside] * frame.width + cols[inside])] += 1
+    return counts.reshape(frame.shape)
+
+
 def paint_people(mask: np.ndarray, frame: OccupancyGrid, people: np.ndarray) -> None:
     """Mark in ``mask`` the cells covered by people given as rows (x, y, radius) [m]."""
     if len(people) == 0:
@@ -164,8 +180,8 @@ def ape_statistics(estimated_xy, true_xy) -> dict:
     }
 
 
-def growth_scores(before, after, whole, counts: np.ndarray, min_views: int = MIN_OBSERVATIONS
-                  ) -> dict:
+def growth_scores(before, after, whole, counts: np.ndarray, min_views: int = MIN_OBSERVATIONS,
+                  hits: np.ndarray | None = None) -> dict:
     """How an update grew a partial map ``before`` into ``after``, against ``whole`` (a map of
     all of the place), on the cells unknown in ``before``, known in ``whole`` and observed by
     at least ``min_views`` of the update's scans (``counts``, e.g. ``ObservationCounter``):
@@ -173,7 +189,11 @@ def growth_scores(before, after, whole, counts: np.ndarray, min_views: int = MIN
     whole map is free, occupied within one cell of its occupied cells), the share of the
     whole map's surfaces among them drawn (``surfaces_drawn``), and the occupied cells of
     ``before`` freed (``freed``; ``freed_also_in_whole``: of them, occupied in the whole map
-    too)."""
+    too). With ``hits`` (per cell, the update's scans with a beam ending in it:
+    ``scan_hit_counts``), ``walls_freed``: of those, the cells of a structure of the whole map
+    (an occupied 8-neighbour there) that the update's scans still hit. The rest are cells the
+    whole map has alone amid free cells, or things its first part saw and the update's scans
+    see through and never hit, which the whole map, a mixture of both, keeps."""
     b, a, w = _cells(before), _cells(after), _cells(whole)
     unknown = (b == UNKNOWN) & (counts >= min_views) & (w != UNKNOWN)
     out = a[unknown]
@@ -182,8 +202,21 @@ def growth_scores(before, after, whole, counts: np.ndarray, min_views: int = MIN
     occupied = b == OCCUPIED
     surfaces = w[unknown] == OCCUPIED
     n = int(unknown.sum())
-    return {"cells": n, "known": float((out != UNKNOWN).mean()) if n else math.nan,
+    freed_occupied = occupied & (w == OCCUPIED) & (a == FREE)
+    walls = {}
+    if hits is not None:
+        structure = freed_occupied & (_occupied_neighbours(w == OCCUPIED) > 0)
+        walls = {"walls_freed": int((structure & (hits > 0)).sum())}
+    return walls | {"cells": n, "known": float((out != UNKNOWN).mean()) if n else math.nan,
             "agreeing": float((right_free | right_occupied).mean()) if n else math.nan,
             "surfaces_drawn": float(right_occupied[surfaces].mean()) if surfaces.any() else 0.0,
             "freed": int((occupied & (a == FREE)).sum()),
-            "freed_also_in_whole": int((occupied & (w == OCCUPIED) & (a == FREE)).sum())}
+            "freed_also_in_whole": int(freed_occupied.sum())}
+
+
+def _occupied_neighbours(occupied: np.ndarray) -> np.ndarray:
+    """Per cell, how many of its 8-neighbours are ``occupied``."""
+    p = np.pad(occupied, 1).astype(np.int8)
+    h, w = occupied.shape
+    return sum(p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w] for dr in (-1, 0, 1) for dc in (-1, 0, 1)
+               if dr or dc)

@@ -47,7 +47,9 @@ from updater import UpdaterConfig
 # - the run filter by width as well as by beams (min_run_width 0.2 m): a lidar of 1 deg steps
 #   needs 0.28 m of face at 8 m for 3 beams, so far objects were dropped as thin ones;
 # - a removed object freed as a whole (spread_removed): the sides of a box that a sparse
-#   recording sees through once or twice go with the rest of it.
+#   recording sees through once or twice go with the rest of it;
+# - the neighbour support by the map's value (support_exact_state): unknown cells seen
+#   through as the map grows do not support freeing the wall behind them.
 # ``mapupdate run`` keeps the class's defaults (the paper's and its authors' code): its
 # figures are the paper's method's.
 ROBOT_UPDATER_DEFAULTS = {
@@ -57,6 +59,7 @@ ROBOT_UPDATER_DEFAULTS = {
     "gate_recovery_distance": 0.0, "gate_turn_cover": True, "gate_turn_views": 2,
     "gate_confirm": True,
     "unanimous_min": 3, "min_run_width": 0.2, "spread_removed": True,
+    "support_exact_state": True,
 }
 
 # The sections of the file and the configuration each holds.

@@ -691,7 +691,8 @@ def ref_decide_all(hist, data, mask, threshold, support, seen=None, few=0):
                     near_conf |= pad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
         changed |= (n >= few) & (seen < threshold) & (n == seen) & ~(occ & near_conf)
     if support:
-        occ = data != FREE
+        # the paper's two states (free / occupied-or-unknown), or with support 2 M's values
+        occ = data.astype(int) if support == 2 else data != FREE
         strong = n >= threshold
         h, w = data.shape
         s = np.zeros_like(n)
@@ -734,7 +735,7 @@ def test_push_flags_against_reference():
     assert not ch_marks[changed >> 3].any() and not un_marks[unchanged >> 3].any()
 
 
-@pytest.mark.parametrize("support", [False, True])
+@pytest.mark.parametrize("support", [False, True, 2])
 @pytest.mark.parametrize("few", [0, 3])
 @pytest.mark.parametrize("packed", [False, True])
 def test_decide_incremental_equals_full_map(support, few, packed):
@@ -789,6 +790,25 @@ def test_neighbour_support_rule():
     decided[:] = 0
     assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, True) == 0
     assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, False) == 0
+
+
+def test_unknown_cells_support_an_occupied_one_only_in_the_two_states():
+    # An occupied cell with n = 4 and three unknown 8-neighbours at n >= 7 (seen through as the
+    # map grows): 4 + 3 = 7 in the paper's two states, 4 with the same value of M (support 2).
+    data = np.full((5, 5), -1, np.int8)
+    data[2, 2] = OCC
+    hist = np.zeros(25, np.uint16)
+    hist[12] = 0b1111
+    for j in (6, 7, 8):
+        hist[j] = 0b1111111
+    seen = np.full(25, 255, np.uint8)
+    for support, want in ((1, 1), (2, 0)):
+        decided = np.zeros(4, np.uint8)
+        assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0,
+                             support) == want
+    data[1, 1:4] = OCC       # occupied neighbours support it either way
+    decided = np.zeros(4, np.uint8)
+    assert K.decide_cell(hist, seen, data.reshape(-1), decided, 12, 5, 0x3FF, 7, 0, 2) == 1
 
 
 def test_unanimous_rule_for_few_observations():

@@ -887,14 +887,24 @@ def confirmed(hist, seen, ref, idx, mask, shift=0):
     return popcount16(hist[idx] & mask) < min(seen_n, window)
 
 
+@njit(cache=True, inline="always")
+def same_state(a, b, support):
+    """Whether two cells of M count as of the same state for the neighbour support: the
+    paper's two states (free / occupied-or-unknown), or, with ``support`` 2, the same value,
+    so that unknown cells seen through lend an occupied one no support."""
+    if support == 2:
+        return a == b
+    return (a != FREE) == (b != FREE)
+
+
 @njit(cache=True)
 def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, support, shift=0):
     """Apply the decision rule to cell ``idx`` (flat arrays) and update its decided bit: changed
     when n_c >= T; or, with ``few`` > 0, when the cell was observed fewer than T times, at least
     ``few`` times, and every flag it got says changed (an occupied cell of M only if no occupied
     8-neighbour is ``confirmed``: a wall grazed by a few beams keeps its cells); or, with
-    ``support``, when n_c plus its 8-neighbours of the same two-state (free /
-    occupied-or-unknown) in ``ref`` with n >= T reaches T. Returns +1, -1 or 0, the change of
+    ``support``, when n_c plus its 8-neighbours of the same state in ``ref``
+    (``same_state``) with n >= T reaches T. Returns +1, -1 or 0, the change of
     the number of changed cells."""
     n = popcount16(hist[idx] & mask)
     changed = n >= threshold
@@ -912,11 +922,11 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
     if not changed and support:
         height = ref.shape[0] // width
         row, col = idx // width, idx % width
-        occ = ref[idx] != FREE
         for rr in range(max(row - 1, 0), min(row + 2, height)):
             for cc in range(max(col - 1, 0), min(col + 2, width)):
                 j = rr * width + cc
-                if j != idx and (ref[j] != FREE) == occ and popcount16(hist[j] & mask) >= threshold:
+                if j != idx and same_state(ref[j], ref[idx], support) and \
+                        popcount16(hist[j] & mask) >= threshold:
                     n += 1
         changed = n >= threshold
     if changed == (bit_get(decided, idx) == 1):
@@ -965,10 +975,9 @@ def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support
                                                                                    window):
                                         changed = False
                 if not changed and support:
-                    occ = ref[i] != FREE
                     for rr in range(r0, r1):
                         for j in range(rr * width + c0, rr * width + c1):
-                            if j != i and (ref[j] != FREE) == occ and \
+                            if j != i and same_state(ref[j], ref[i], support) and \
                                     popcount16(hist[j] & mask) >= threshold:
                                 n += 1
                     changed = n >= threshold
@@ -1044,41 +1053,90 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out, mask=0xFFFF):
 
 
 @njit(cache=True)
-def spread_freed(ref, decided, hist, seen, width, mask, shift, spread):
+def spread_freed(ref, decided, hist, seen, width, mask, shift, max_cells, spread, done, big):
     """A removed object freed as a whole: from each occupied cell of ``ref`` that the rule
     changed, across the 8-neighbours occupied in ``ref`` whose every recent flag says changed
-    (one at least) and that lie beside no ``confirmed`` cell, marked in ``spread`` (bits, all
-    clear) and spread on from. Returns the count marked."""
+    (one at least), marked in ``spread`` (bits, all clear) and spread on from; only within the 8-connected occupied structures of ``ref`` of
+    at most ``max_cells`` cells none of which is ``confirmed`` (objects the scans no longer
+    see anywhere, not walls). ``done``, ``big``: scratch bit planes,
+    all clear. Returns the count marked."""
     size = ref.shape[0]
     height = size // width
-    window = popcount16(mask)
+    members = np.empty(max_cells + 9, np.int64)
     stack = np.empty(256, np.int64)
-    top = 0
     marked = 0
     for b in range(decided.shape[0]):
         if decided[b] == 0:
             continue
         for idx in range(b * 8, min(b * 8 + 8, size)):
-            if bit_get(decided, idx) and ref[idx] == OCCUPIED:
-                stack, top = _push(stack, top, idx)
-    while top > 0:
-        top -= 1
-        idx = stack[top]
+            if not bit_get(decided, idx) or ref[idx] != OCCUPIED or bit_get(done, idx) or \
+                    bit_get(big, idx):
+                continue
+            n, seen_still = _flood_occupied(ref, hist, seen, width, height, mask, shift, idx,
+                                            max_cells, done, members)
+            if n > max_cells or seen_still:     # a wall, a large or a present structure
+                for k in range(n):
+                    j = members[k]
+                    done[j >> 3] &= np.uint8(~(1 << (j & 7)) & 0xFF)
+                    big[j >> 3] |= np.uint8(1 << (j & 7))
+                continue
+            top = 0
+            for k in range(n):
+                if bit_get(decided, members[k]):
+                    stack, top = _push(stack, top, members[k])
+            while top > 0:
+                top -= 1
+                stack, top, added = _spread_from(ref, decided, hist, seen, width, height, mask,
+                                                 shift, stack[top], spread, stack, top)
+                marked += added
+    return marked
+
+
+@njit(cache=True)
+def _flood_occupied(ref, hist, seen, width, height, mask, shift, start, max_cells, done,
+                    members):
+    """The 8-connected occupied cells of ``ref`` with ``start`` into ``members``, marked in
+    ``done``; stops once more than ``max_cells`` are found, or one of them is ``confirmed``
+    (a part of the structure the scans still see). Returns (how many, whether one is)."""
+    members[0] = start
+    done[start >> 3] |= np.uint8(1 << (start & 7))
+    n, k = 1, 0
+    while k < n:
+        idx = members[k]
+        k += 1
+        if confirmed(hist, seen, ref, idx, mask, shift):
+            return n, True
         row, col = idx // width, idx % width
         for rr in range(max(row - 1, 0), min(row + 2, height)):
             for cc in range(max(col - 1, 0), min(col + 2, width)):
                 j = rr * width + cc
-                if ref[j] != OCCUPIED or bit_get(decided, j) or bit_get(spread, j):
-                    continue
-                seen_n = flag_count(hist, seen, j, shift)
-                if seen_n == 0 or popcount16(hist[j] & mask) < min(seen_n, window):
-                    continue
-                if _beside_confirmed(hist, seen, ref, j, width, height, mask, shift):
-                    continue
-                spread[j >> 3] |= np.uint8(1 << (j & 7))
-                marked += 1
-                stack, top = _push(stack, top, j)
-    return marked
+                if ref[j] == OCCUPIED and not bit_get(done, j):
+                    done[j >> 3] |= np.uint8(1 << (j & 7))
+                    members[n] = j
+                    n += 1
+        if n > max_cells:
+            return n, False
+    return n, False
+
+
+@njit(cache=True)
+def _spread_from(ref, decided, hist, seen, width, height, mask, shift, idx, spread, stack, top):
+    """Mark and push the neighbours of ``idx`` the spread takes (``spread_freed``)."""
+    window = popcount16(mask)
+    added = 0
+    row, col = idx // width, idx % width
+    for rr in range(max(row - 1, 0), min(row + 2, height)):
+        for cc in range(max(col - 1, 0), min(col + 2, width)):
+            j = rr * width + cc
+            if ref[j] != OCCUPIED or bit_get(decided, j) or bit_get(spread, j):
+                continue
+            seen_n = flag_count(hist, seen, j, shift)
+            if seen_n == 0 or popcount16(hist[j] & mask) < min(seen_n, window):
+                continue
+            spread[j >> 3] |= np.uint8(1 << (j & 7))
+            added += 1
+            stack, top = _push(stack, top, j)
+    return stack, top, added
 
 
 @njit(cache=True, inline="always")
@@ -1089,17 +1147,6 @@ def _push(stack, top, idx):
         stack = grown
     stack[top] = idx
     return stack, top + 1
-
-
-@njit(cache=True, inline="always")
-def _beside_confirmed(hist, seen, ref, idx, width, height, mask, shift):
-    row, col = idx // width, idx % width
-    for rr in range(max(row - 1, 0), min(row + 2, height)):
-        for cc in range(max(col - 1, 0), min(col + 2, width)):
-            j = rr * width + cc
-            if j != idx and confirmed(hist, seen, ref, j, mask, shift):
-                return True
-    return False
 
 
 # --- enclosed unknown regions of the reference map (once per map) -----------------------------

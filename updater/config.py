@@ -42,7 +42,7 @@ BOUNDS = {
     "seen_surface_radius": (0.0, 1.0), "fill_gaps_clearance": (0.0, 1.0),
     "fill_gaps_free_margin": (0.0, 5.0), "n_skip": (0, 100), "free_fraction": (1e-3, 1.0),
     "buffer_size": (1, MAX_BUFFER_SIZE), "threshold": (1, MAX_BUFFER_SIZE),
-    "unanimous_min": (0, MAX_BUFFER_SIZE),
+    "unanimous_min": (0, MAX_BUFFER_SIZE), "spread_max_area": (0.0, 10_000.0),
     "last_check_max_area": (0.0, 10_000.0),
 }
 
@@ -128,6 +128,11 @@ class UpdaterConfig:
     buffer_size: int = 10                    # N_b flags per cell
     threshold: int = 7                       # T: changed when n_c (+ support) reaches this
     neighbour_support: bool = True           # count 8-neighbours of the same state with n >= T
+    # Not in the paper (_kernels.same_state): the support counts only neighbours of the same
+    # value of M. The paper's two states put unknown with occupied, so where the map grows
+    # into the unknown, the unknown cells in front of a wall, seen through as the scans reach
+    # the wall, lend the wall's cells their support and free them.
+    support_exact_state: bool = False
     # Not in the paper: a cell observed fewer than T times in all (a corridor seen in passing,
     # a recording that keeps a scan a metre) is changed when every one of its flags says
     # changed and there are at least this many. A later contrary flag undoes it. 0: off.
@@ -135,8 +140,13 @@ class UpdaterConfig:
     # Not in the paper (steps.spread_freed): a removed object is freed as a whole. An occupied
     # cell of M next to one the rule freed (or to one freed this way), every flag of which says
     # changed, is freed too, however few its flags, unless it lies beside a surface the scans
-    # still see. Needs the flag counts (unanimous_min > 0). Applied to the output map.
+    # still see, and only within an 8-connected structure of occupied cells of M of at most
+    # spread_max_area (an object, not a wall: pose noise wears a wall's cells one by one, and
+    # the spread would carry that along the wall). Needs the flag counts (unanimous_min > 0).
+    # Applied to the output map.
     spread_removed: bool = False
+    spread_max_area: float = 1.0             # [m^2] of occupied cells: larger structures of M
+                                             # (walls) get no spread
     # --- Last check ---------------------------------------------------------------------------
     last_check: bool = True
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
@@ -145,7 +155,7 @@ class UpdaterConfig:
         for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
                      "last_check", "fill_gaps",
                      "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams",
-                     "spread_removed"):
+                     "spread_removed", "support_exact_state"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")

@@ -315,7 +315,7 @@ class MapUpdater:
             return self._decided
         return self._decided | steps.spread_freed(self._hist.reshape(-1), self._seen.reshape(-1),
                                                   self._ref.reshape(-1), self._decided,
-                                                  self._ref.shape[1], self.config)
+                                                  self._ref.shape[1], self._res, self.config)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the cells the decision rule marks changed, in row-major order.

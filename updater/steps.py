@@ -500,6 +500,14 @@ def count_shift(cfg: UpdaterConfig) -> int:
     return cfg.buffer_size
 
 
+def support_mode(cfg: UpdaterConfig) -> int:
+    """The neighbour support the decision kernels apply: 0 none, 1 the paper's two states
+    (free / occupied-or-unknown), 2 the same value of M (``support_exact_state``)."""
+    if not cfg.neighbour_support:
+        return 0
+    return 2 if cfg.support_exact_state else 1
+
+
 def push_flags(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                n_changed: int, n_unchanged: int, cfg: UpdaterConfig, ch_marks: np.ndarray,
                un_marks: np.ndarray, ws: Workspace) -> int:
@@ -526,7 +534,7 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
     of the number of changed cells."""
     return kernels().decide(hist_flat, seen_flat, ref_flat, decided, moved=ws.moved[:n_moved],
                             width=width, mask=buffer_mask(cfg), threshold=cfg.threshold,
-                            few=cfg.unanimous_min, support=cfg.neighbour_support, stamp=stamp,
+                            few=cfg.unanimous_min, support=support_mode(cfg), stamp=stamp,
                             shift=count_shift(cfg))
 
 
@@ -541,7 +549,7 @@ def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.n
     return int(kernels().push_and_decide(
         hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
         unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg), threshold=cfg.threshold,
-        few=cfg.unanimous_min, support=cfg.neighbour_support, width=width, ch_marks=ch_marks,
+        few=cfg.unanimous_min, support=support_mode(cfg), width=width, ch_marks=ch_marks,
         un_marks=un_marks, moved=ws.moved, shift=count_shift(cfg)))
 
 
@@ -551,22 +559,26 @@ def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarra
     decided = np.zeros((ref_flat.size + 7) // 8, np.uint8)
     count = kernels().decide_all(hist_flat, seen_flat, ref_flat, decided, width=width,
                                  mask=buffer_mask(cfg), threshold=cfg.threshold,
-                                 few=cfg.unanimous_min, support=cfg.neighbour_support,
+                                 few=cfg.unanimous_min, support=support_mode(cfg),
                                  shift=count_shift(cfg))
     return decided, int(count)
 
 
 # --- output and last check --------------------------------------------------------------------
 def spread_freed(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
-                 decided: np.ndarray, width: int, cfg: UpdaterConfig) -> np.ndarray:
+                 decided: np.ndarray, width: int, res: float, cfg: UpdaterConfig) -> np.ndarray:
     """Bits of the cells freed with the object they belong to (``cfg.spread_removed``): the
     occupied cells of M, connected through each other to one the rule freed, whose every
     flag says changed (one flag at least: a side of a box seen once or twice) and that lie
-    beside no surface the scans still see. Empty bits when the rule is off."""
+    beside no surface the scans still see, within structures of M's occupied cells of at most
+    ``spread_max_area``. Empty bits when the rule is off."""
     spread = np.zeros_like(decided)
     if cfg.spread_removed:
+        max_cells = int(math.floor(cfg.spread_max_area / res**2 + 1e-9))
         kernels().spread_freed(ref_flat, decided, hist_flat, seen_flat, width=width,
-                               mask=buffer_mask(cfg), shift=count_shift(cfg), spread=spread)
+                               mask=buffer_mask(cfg), shift=count_shift(cfg),
+                               max_cells=max_cells, spread=spread, done=np.zeros_like(decided),
+                               big=np.zeros_like(decided))
     return spread
 
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
+from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan
 import evaluation as ev
 
 F, O, U = FREE, OCCUPIED, UNKNOWN
@@ -109,6 +109,37 @@ def test_observation_counter_counts_each_cell_once_per_scan():
     # an inf beam passes through up to the observation range
     counter.add_scan(pose, np.array([np.inf]), np.array([0.0]))
     assert counter.counts[20, 10] == 1 and counter.counts[20, 11] == 0
+
+
+def test_scan_hit_counts_counts_each_cell_once_per_scan():
+    frame = OccupancyGrid.empty(40, 40, 0.1, (0.0, 0.0))
+    scan = Scan(np.array([0.52, 0.53, np.nan, 5.0]), 0.0, 1e-4, 0.1, 10.0)
+    counts = ev.scan_hit_counts(frame, [(scan, Pose2D(0.05, 2.05, 0.0))] * 3, max_range=1.0)
+    # two beams end in the cell at x = 0.57 (column 5), the NaN and the beam past max_range
+    # end nowhere
+    assert counts[20, 5] == 3 and counts.sum() == 3
+
+
+def test_growth_scores_count_walls_as_structures_the_later_scans_still_hit():
+    # before: a wall (row 1, columns 0-3) and a lone cell (row 3, column 4); the update frees
+    # wall cell (1, 2) and the lone cell, the whole map keeps both; the later scans hit the
+    # wall cell only
+    before = grid([[F, F, F, F, F, F],
+                   [O, O, O, O, F, F],
+                   [F, F, F, F, F, F],
+                   [F, F, F, F, O, F]])
+    after = grid([[F, F, F, F, F, F],
+                  [O, O, F, O, F, F],
+                  [F, F, F, F, F, F],
+                  [F, F, F, F, F, F]])
+    counts = np.full((4, 6), 10)
+    hits = np.zeros((4, 6), int)
+    hits[1, 2] = 2
+    g = ev.growth_scores(before, after, before, counts, hits=hits)
+    assert g["freed"] == 2 and g["freed_also_in_whole"] == 2 and g["walls_freed"] == 1
+    hits[1, 2] = 0           # a structure the later scans never hit: gone, not a wall
+    assert ev.growth_scores(before, after, before, counts, hits=hits)["walls_freed"] == 0
+    assert "walls_freed" not in ev.growth_scores(before, after, before, counts)
 
 
 def test_paint_people_marks_cell_centres_inside_the_disc():

@@ -76,14 +76,21 @@ def warm(metres: float = ROUTE_METRES) -> float:
 
 def rare_paths() -> None:
     """Kernels a short run need not reach but a long one can: the estimate of a particle cloud
-    split in two clusters, with the localiser's argument types."""
+    split in two clusters, with the localiser's argument types; and the updater with
+    ``mapupdate update``'s and the nodes' rules, which ``run`` leaves off (the growth into
+    the unknown, the unanimous rule, the spread of freed objects)."""
     import numpy as np
 
     from localization.estimate import estimate
     from localization.resample import KldParameters
+    from robot.pipeline import RobotPipeline, warm_up
+    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
+    from updater import MapUpdater, UpdaterConfig
 
     poses = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 1.0]])
     estimate(poses, np.full(2, 0.5), KldParameters(1, 2, 0.05, 0.99, np.array([0.5, 0.5, 0.2])))
+    config = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+    warm_up(lambda grid: RobotPipeline(MapUpdater(grid, config)))
 
 
 def main(argv: list[str] | None = None) -> int:

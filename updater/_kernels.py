@@ -1056,10 +1056,10 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out, mask=0xFFFF):
 def spread_freed(ref, decided, hist, seen, width, mask, shift, max_cells, spread, done, big):
     """A removed object freed as a whole: from each occupied cell of ``ref`` that the rule
     changed, across the 8-neighbours occupied in ``ref`` whose every recent flag says changed
-    (one at least), marked in ``spread`` (bits, all clear) and spread on from; only within the 8-connected occupied structures of ``ref`` of
-    at most ``max_cells`` cells none of which is ``confirmed`` (objects the scans no longer
-    see anywhere, not walls). ``done``, ``big``: scratch bit planes,
-    all clear. Returns the count marked."""
+    (one at least), marked in ``spread`` (bits, all clear) and spread on from; only within
+    the 8-connected occupied structures of ``ref`` of at most ``max_cells`` cells none of
+    which is ``confirmed`` (objects the scans no longer see anywhere, not walls). ``done``,
+    ``big``: scratch bit planes, all clear. Returns the count marked."""
     size = ref.shape[0]
     height = size // width
     members = np.empty(max_cells + 9, np.int64)

@@ -83,14 +83,14 @@ def rare_paths() -> None:
 
     from localization.estimate import estimate
     from localization.resample import KldParameters
+    from robot.methods import make_method
     from robot.pipeline import RobotPipeline, warm_up
-    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
-    from updater import MapUpdater, UpdaterConfig
+    from robot.robot_config import ROBOT_UPDATER_DEFAULTS, section_config
 
     poses = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 1.0]])
     estimate(poses, np.full(2, 0.5), KldParameters(1, 2, 0.05, 0.99, np.array([0.5, 0.5, 0.2])))
-    config = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
-    warm_up(lambda grid: RobotPipeline(MapUpdater(grid, config)))
+    config = section_config("updater", ROBOT_UPDATER_DEFAULTS, "defaults")
+    warm_up(lambda grid: RobotPipeline(make_method("paper", grid, config)))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -194,4 +194,5 @@ def warm_up(build, resolution: float = 0.05) -> None:
         scan = Scan(ranges, -math.pi, 2 * math.pi / 360, 0.0, 2 * n * resolution, time=k)
         robot = Pose2D(x, y, th)
         pipeline.step(scan, Pose2D(0.0, 0.0, 0.0), odometry=robot, pose=robot)
-    pipeline.updater.updated_map()          # what a node publishes, with its own kernels
+    if getattr(pipeline, "updater", None) is not None:
+        pipeline.updater.updated_map()      # what a node publishes, with its own kernels

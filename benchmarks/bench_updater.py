@@ -45,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gridmap import OccupancyGrid, Pose2D, Scan  # noqa: E402
 from gridmap.raycast import cast_rays  # noqa: E402
 from updater import MapUpdater, UpdaterConfig  # noqa: E402
+from updater_before import AS_BEFORE  # noqa: E402
 from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared/data"
@@ -287,10 +288,8 @@ def log_calls(path: Path, parts: int, tmp: Path):
                         Outputs(tmp / "updated.yaml"))
     finally:
         MapUpdater.process = plain_process
-    # the run filter by width and the spread of freed objects came after the code kept from
-    # before, which cannot run them
-    return first, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0,
-                                   "spread_removed": False}), calls
+    # update's rules as the code kept from before can run them
+    return first, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **AS_BEFORE}), calls
 
 
 def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, dict]]:

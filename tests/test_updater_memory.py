@@ -29,12 +29,12 @@ except ImportError:  # tests collected as a package
     from tests.test_updater_speedup import room_session, unknown_corner
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from updater_before import AS_BEFORE  # noqa: E402
 from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 
 BAR_BYTES = 16e6
-# update's defaults as the code kept in benchmarks/updater_before can run them: it has no run
-# filter by width and no spread of freed objects
-ROBOT_AS_BEFORE = {**ROBOT_UPDATER_DEFAULTS, "min_run_width": 0.0, "spread_removed": False}
+# update's defaults as the code kept in benchmarks/updater_before can run them
+ROBOT_AS_BEFORE = {**ROBOT_UPDATER_DEFAULTS, **AS_BEFORE}
 SIZE = 2000
 
 

@@ -6,4 +6,8 @@ live package's. Not used by anything else; not maintained."""
 
 from .map_updater import MapUpdater
 
-__all__ = ["MapUpdater"]
+# Rules of the live updater that came after this copy, set as this copy runs them: the run
+# filter by width, the spread of freed objects, the neighbour support by M's value.
+AS_BEFORE = {"min_run_width": 0.0, "spread_removed": False, "support_exact_state": False}
+
+__all__ = ["AS_BEFORE", "MapUpdater"]

@@ -1,8 +1,9 @@
 """``UpdaterConfig.spread_removed``: a removed object is freed as a whole. An occupied cell of M
 next to one the rule freed, every flag of which says changed (one at least), is freed too,
-unless it lies beside a surface the scans still see. A sparse recording sees the sides of a
-box through once or twice (fewer than the unanimous rule's 3), and people walking past hide
-more of its views; the rule frees them with the rest of the box."""
+within a structure of M's occupied cells of at most ``spread_max_area`` that no scan still
+sees (no cell of it with an unchanged flag among its recent ones). A sparse recording sees
+the sides of a box through once or twice (fewer than the unanimous rule's 3), and people
+walking past hide more of its views; the rule frees them with the rest of the box."""
 
 from __future__ import annotations
 

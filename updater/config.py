@@ -139,10 +139,10 @@ class UpdaterConfig:
     unanimous_min: int = 0
     # Not in the paper (steps.spread_freed): a removed object is freed as a whole. An occupied
     # cell of M next to one the rule freed (or to one freed this way), every flag of which says
-    # changed, is freed too, however few its flags, unless it lies beside a surface the scans
-    # still see, and only within an 8-connected structure of occupied cells of M of at most
-    # spread_max_area (an object, not a wall: pose noise wears a wall's cells one by one, and
-    # the spread would carry that along the wall). Needs the flag counts (unanimous_min > 0).
+    # changed, is freed too, however few its flags, within an 8-connected structure of
+    # occupied cells of M of at most spread_max_area none of which the scans still see (an
+    # object that went, not a wall: pose noise wears a static thing's cells one by one, and
+    # the spread would carry that along it). Needs the flag counts (unanimous_min > 0).
     # Applied to the output map.
     spread_removed: bool = False
     spread_max_area: float = 1.0             # [m^2] of occupied cells: larger structures of M

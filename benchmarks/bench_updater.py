@@ -202,7 +202,8 @@ def time_inner(ref: OccupancyGrid, scans) -> dict:
 
 
 def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
-    """The cast and the walks of ``time_inner``'s recorded calls: seconds in all, by part."""
+    """The cast and the walks of ``time_inner``'s recorded calls: seconds in all, by part (the
+    free walks with the reckoning of where each may start)."""
     spent = {"virtual beams cast (cast_virtual)": 0.0, "free walks (walk_beams)": 0.0,
              "removed-obstacle walks (walk_beams)": 0.0}
     marks = np.zeros((ref.data.size + 7) // 8, np.uint8)
@@ -210,10 +211,11 @@ def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
     for name, args, kw in seen:
         if name == "classify_scan":
             t0 = CLOCK()
-            kernels.cast_virtual(args[0], args[1], kw["virtual"], kw["max_len"],
+            kernels.cast_virtual(args[0], args[1], args[2], kw["virtual"], kw["max_len"],
                                  kw["out_expected"], kw["out_found"])
             spent["virtual beams cast (cast_virtual)"] += CLOCK() - t0
             continue
+        skips = np.zeros(len(kw["hits"]))
         for label, reach, want, drop, kind in (
                 ("free walks (walk_beams)", "free_reach", kernels.UNCHANGED, False,
                  kernels.WALK_FREE),
@@ -221,9 +223,13 @@ def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
                  kernels.WALK_BLOCKED)):
             marks[:] = 0
             t0 = CLOCK()
-            kernels.walk_beams(args[0], marks, kw["sensor"], kw["hits"], kw[reach],
+            if kind == kernels.WALK_FREE:
+                kernels.free_walk_skips(kw["sensor"], kw["hits"], kw[reach], kw["verdict"],
+                                        want, kw["increment"], kw["wrap"], kw["cap"], skips)
+            kernels.walk_beams(args[0], marks, args[2], kw["sensor"], kw["hits"], kw[reach],
                                select=kw["verdict"], want=want, drop_last=drop, cap=kw["cap"],
-                               kind=kind, marks=marks, out=out, n=0)
+                               kind=kind, marks=marks, out=out, n=0,
+                               skip=skips if kind == kernels.WALK_FREE else kernels.NO_SKIPS)
             spent[label] += CLOCK() - t0
     return spent
 

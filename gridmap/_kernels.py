@@ -8,7 +8,7 @@ kernels call ``traverse`` and ``first_hit`` from inside their own njit functions
 import numpy as np
 from numba import njit
 
-from .cells import OCCUPIED
+from .cells import FREE, OCCUPIED
 
 # Status codes of first_hit.
 NO_HIT = 0       # nothing blocking within max length
@@ -183,7 +183,17 @@ def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
             t = t_max_y
             cy += step_y
             t_max_y += t_delta_y
-    # The last cell or two before the exit or max_len: every check.
+    return _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x,
+                       t_delta_y, t_end, max_len, block_unknown)
+
+
+@njit(cache=True, inline="always")
+def _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x, t_delta_y,
+                t_end, max_len, block_unknown):
+    """The end of ``first_hit``'s walk: the last cell or two before the grid's exit or
+    max_len, with every check."""
+    height = data.shape[0]
+    width = data.shape[1]
     while True:
         if t_max_x <= t_max_y:
             t = t_max_x
@@ -199,6 +209,132 @@ def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
             return t, LEFT_GRID
         if is_blocking(data[cy, cx], block_unknown):
             return t, HIT
+
+
+# --- clear blocks: free space crossed in one jump -------------------------------------------
+# A walk through free space needs no look at each cell: where a square of blocks around the
+# walk's cell holds only free cells, ``steps_to`` moves the walk to the square's edge at once.
+CLEAR_SHIFT = 2         # blocks of 4 x 4 cells: 1/16 byte a cell
+
+
+@njit(cache=True)
+def clear_blocks(data, shift, out):
+    """Per block of 2**shift x 2**shift cells of ``data`` (``out``: one row per block row,
+    the last one partial when the size does not divide the map's): the Chebyshev distance in
+    blocks to the nearest block that is not clear, at most 255. A block is clear when it lies
+    whole on the map (outside is unknown) and all its cells are free, so every block less than
+    out[b] blocks from b is clear (0: b is not)."""
+    height, width = data.shape
+    bh, bw = out.shape
+    size = 1 << shift
+    for by in range(bh):
+        for bx in range(bw):
+            out[by, bx] = min(by + 1, bx + 1, bh - by, bw - bx, 255)
+            if (by + 1) * size > height or (bx + 1) * size > width:
+                out[by, bx] = 0
+    for r in range(height):
+        for c in range(width):
+            if data[r, c] != FREE:
+                out[r >> shift, c >> shift] = 0
+    # two passes of the 3 x 3 chamfer: exact for the Chebyshev distance
+    for by in range(bh):
+        for bx in range(bw):
+            v = out[by, bx]
+            for dy, dx in ((-1, -1), (-1, 0), (-1, 1), (0, -1)):
+                y, x = by + dy, bx + dx
+                if 0 <= y and 0 <= x < bw:
+                    v = min(v, out[y, x] + 1)
+            out[by, bx] = v
+    for by in range(bh - 1, -1, -1):
+        for bx in range(bw - 1, -1, -1):
+            v = out[by, bx]
+            for dy, dx in ((1, 1), (1, 0), (1, -1), (0, 1)):
+                y, x = by + dy, bx + dx
+                if y < bh and 0 <= x < bw:
+                    v = min(v, out[y, x] + 1)
+            out[by, bx] = v
+
+
+@njit(cache=True, inline="always")
+def clear_exit(clear, shift, cx, cy, gx0, gy0, step_x, step_y, t_delta_x, t_delta_y):
+    """The parameter at which a walk from (gx0, gy0) (unit steps ``step_x``, ``step_y``; the
+    parameter between two edges ``t_delta_x``, ``t_delta_y``) leaves the square of clear
+    blocks (``clear_blocks``) centred on the block of cell (cx, cy): every cell it enters
+    before then is free. -1 when that block is not clear."""
+    k = np.int64(clear[cy >> shift, cx >> shift])
+    if k == 0:
+        return -1.0
+    bx = cx >> shift
+    by = cy >> shift
+    ex = (((bx + k) << shift) - gx0) if step_x > 0 else (gx0 - ((bx - k + 1) << shift))
+    ey = (((by + k) << shift) - gy0) if step_y > 0 else (gy0 - ((by - k + 1) << shift))
+    tx = ex * t_delta_x if t_delta_x < np.inf else np.inf
+    ty = ey * t_delta_y if t_delta_y < np.inf else np.inf
+    return min(tx, ty)
+
+
+@njit(cache=True, inline="always")
+def steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y):
+    """(kx, ky): the unit steps along x and along y that take a walk (Amanatides and Woo,
+    next edges at ``t_max_x``, ``t_max_y``) to parameter p: the x edges at or before p and the
+    y edges before p, the walk's own order where two tie, counted at once. The walk's next
+    edges are then t_max + k * t_delta, which can differ in the last bits from the sum that
+    stepping accumulates."""
+    kx = int((p - t_max_x) / t_delta_x) + 1 if t_max_x <= p else 0
+    ky = int((p - t_max_y) / t_delta_y) + 1 if t_max_y < p else 0
+    return kx, ky
+
+
+@njit(cache=True)
+def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
+    """``first_hit`` with unknown blocking (the map's outside too), jumping across squares
+    of clear blocks (``clear_blocks(data, shift, clear)``) instead of stepping through their
+    cells: the same blocking cell, its distance equal up to rounding in the last bits."""
+    height = data.shape[0]
+    width = data.shape[1]
+    if not (0.0 <= gx0 < width and 0.0 <= gy0 < height):
+        return 0.0, LEFT_GRID
+    t0, t1 = clip_to_box(gx0, gy0, cos_a * max_len, sin_a * max_len, float(width), float(height))
+    t = t0 * max_len
+    t_end = t1 * max_len
+    cx = _cell_of(gx0 + t * cos_a, width)
+    cy = _cell_of(gy0 + t * sin_a, height)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
+    t_safe = min(t_end, max_len) - 1e-6
+    k = 0
+    while True:
+        if data[cy, cx] != FREE:
+            return t, HIT
+        # the blocks looked up every fourth cell, with a margin inside the square: the jump's
+        # closed-form sums may round either way
+        k += 1
+        p = min(clear_exit(clear, shift, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
+                           t_delta_y), t_safe) - 1e-6 if (k & 3) == 1 else -1.0
+        if p > t_max_x or p > t_max_y:
+            kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
+            if kx > 0:
+                t = max(t, t_max_x + (kx - 1) * t_delta_x)
+                t_max_x += kx * t_delta_x
+                cx += kx * step_x
+            if ky > 0:
+                t = max(t, t_max_y + (ky - 1) * t_delta_y)
+                t_max_y += ky * t_delta_y
+                cy += ky * step_y
+        if t_max_x <= t_max_y:
+            if t_max_x >= t_safe:
+                break
+            t = t_max_x
+            cx += step_x
+            t_max_x += t_delta_x
+        else:
+            if t_max_y >= t_safe:
+                break
+            t = t_max_y
+            cy += step_y
+            t_max_y += t_delta_y
+    return _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x,
+                       t_delta_y, t_end, max_len, True)
 
 
 @njit(cache=True)

@@ -192,10 +192,11 @@ def test_beam_endpoints():
         (max(rows.max(), 20) - min(rows.min(), 20) + 3)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_cast_virtual_against_cell_march(seed):
+@pytest.mark.parametrize("seed, p_occ", [(0, 0.03), (1, 0.03), (2, 0.03), (3, 0.002),
+                                         (4, 0.002)])
+def test_cast_virtual_against_cell_march(seed, p_occ):
     rng = np.random.default_rng(seed)
-    data = random_map(rng, p_occ=0.03, p_unk=0.02)
+    data = random_map(rng, p_occ=p_occ, p_unk=p_occ / 2)
     sensor = np.array([rng.uniform(5, 45), rng.uniform(5, 35), rng.uniform(-3, 3)])
     data[int(sensor[1]), int(sensor[0])] = FREE
     m = 300
@@ -204,7 +205,7 @@ def test_cast_virtual_against_cell_march(seed):
     directions = np.c_[np.cos(a), np.sin(a)]
     expected, found = np.zeros((m, 2)), np.zeros(m, np.bool_)
     max_len = rng.uniform(10, 40)
-    K.cast_virtual(data, sensor, directions, max_len, expected, found)
+    K.cast_virtual(data, steps.clear_blocks(data), sensor, directions, max_len, expected, found)
     for j in range(m):
         p = ref_expected_point(data, sensor[0], sensor[1], a[j], max_len)
         assert found[j] == (p is not None)

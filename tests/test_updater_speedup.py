@@ -110,23 +110,136 @@ def random_beams(rng, data, n=120):
 
 
 # --- kernels against the references -----------------------------------------------------------
+def open_map(rng, height=90, width=110):
+    """Mostly free, with a few small boxes of occupied or unknown cells and scattered occupied
+    ones: room for squares of clear blocks."""
+    data = np.full((height, width), FREE, np.int8)
+    for _ in range(24):
+        row, col = rng.integers(0, height - 6), rng.integers(0, width - 6)
+        data[row:row + rng.integers(1, 6), col:col + rng.integers(1, 6)] = \
+            rng.choice([OCCUPIED, UNKNOWN])
+    data[rng.random((height, width)) < 0.001] = OCCUPIED
+    return data, rng.random((height, width)) < 0.05
+
+
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("kind", [K.WALK_FREE, K.WALK_BLOCKED, K.WALK_OPEN_UNKNOWN])
-def test_fused_walks_flag_the_cells_of_the_plain_walks_in_order(seed, kind):
+@pytest.mark.parametrize("world", ["cluttered", "open"])
+def test_fused_walks_flag_the_cells_of_the_plain_walks_in_order(seed, kind, world):
+    """With and without the jumps across clear blocks, which leave the order as it is: the
+    cells they jump over are free, and a free walk takes no jumps."""
     rng = np.random.default_rng(seed)
-    data, enclosed = random_map(rng)
-    sensor, hits = random_beams(rng, data)
+    if world == "cluttered":
+        data, enclosed = random_map(rng)
+        sensor, hits = random_beams(rng, data)
+    else:       # the ties at cell corners are the cluttered world's
+        data, enclosed = open_map(rng)
+        sensor, hits = scan_beams(rng, data, 120, 2 * math.pi)
     reach = rng.uniform(-0.2, 1.0, len(hits))
     select = rng.random(len(hits)) < 0.7
     drop_last = bool(seed % 2)
-    enclosed_bits = np.packbits(enclosed.reshape(-1), bitorder="little")
-    marks = np.zeros_like(enclosed_bits)
-    out = np.zeros(data.size + 1, np.int32)
-    n = K.walk_beams(data, enclosed_bits, sensor, hits, reach, select=select, want=True,
-                     drop_last=drop_last, cap=1000, kind=kind, marks=marks, out=out, n=0)
     expect = plain_walks(data, enclosed, sensor, hits, reach, select, drop_last, kind)
-    assert out[:n].tolist() == expect and n > 20
-    assert np.flatnonzero(np.unpackbits(marks, bitorder="little")).tolist() == sorted(expect)
+    clear = steps.clear_blocks(data)
+    if world == "open":
+        assert (clear >= 2).mean() > 0.3      # squares to jump across
+    for blocks in (K.NO_BLOCKS, clear):
+        enclosed_bits = np.packbits(enclosed.reshape(-1), bitorder="little")
+        marks = np.zeros_like(enclosed_bits)
+        out = np.zeros(data.size + 1, np.int32)
+        n = K.walk_beams(data, enclosed_bits, blocks, sensor, hits, reach, select=select,
+                         want=True, drop_last=drop_last, cap=1000, kind=kind, marks=marks,
+                         out=out, n=0, skip=K.NO_SKIPS)
+        assert out[:n].tolist() == expect and n > (20 if world == "cluttered" else 2)
+        assert np.flatnonzero(np.unpackbits(marks, bitorder="little")).tolist() == \
+            sorted(expect)
+
+
+def plain_clear_blocks(data, size=4):
+    """Each block's Chebyshev distance (in blocks, at most 255) to the nearest block that is
+    not whole on the map and free, the blocks just off the map counted as such."""
+    height, width = data.shape
+    bh, bw = -(-height // size), -(-width // size)
+    bad = [(-1, c) for c in range(-1, bw + 1)] + [(bh, c) for c in range(-1, bw + 1)] + \
+        [(r, -1) for r in range(bh)] + [(r, bw) for r in range(bh)]
+    for r in range(bh):
+        for c in range(bw):
+            block = data[r * size:(r + 1) * size, c * size:(c + 1) * size]
+            if block.shape != (size, size) or (block != FREE).any():
+                bad.append((r, c))
+    bad = np.array(bad)
+    out = np.zeros((bh, bw), np.uint8)
+    for r in range(bh):
+        for c in range(bw):
+            out[r, c] = min(255, int(np.max(np.abs(bad - (r, c)), axis=1).min()))
+    return out
+
+
+@pytest.mark.parametrize("seed, shape", [(0, (90, 110)), (1, (45, 55)), (2, (64, 64)),
+                                         (3, (3, 7))])
+def test_clear_blocks_are_the_distance_to_the_nearest_block_not_clear(seed, shape):
+    data, _ = open_map(np.random.default_rng(seed), *shape) if min(shape) > 6 else \
+        (np.zeros(shape, np.int8), None)
+    got = steps.clear_blocks(data)
+    assert np.array_equal(got, plain_clear_blocks(data))
+    assert shape == (3, 7) or got.max() >= 2
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_cast_that_jumps_stops_where_the_cell_march_stops(seed):
+    from gridmap import _kernels as G
+
+    rng = np.random.default_rng(seed)
+    data, _ = open_map(rng) if seed % 2 else random_map(rng)
+    clear = steps.clear_blocks(data)
+    sensor, hits = random_beams(rng, data, n=300)
+    if seed == 6:       # on a cell corner, straight along the axes and diagonals
+        sensor[:2] = np.floor(sensor[:2])
+    d = hits - sensor[:2]
+    d /= np.hypot(*d.T)[:, None]
+    d[:8] = np.array([[1, 0], [0, 1], [-1, 0], [0, -1], [1, 1], [-1, 1], [1, -1], [-1, -1]]) \
+        / np.hypot(1, [0, 0, 0, 0, 1, 1, 1, 1])[:, None]
+    for (ca, sa), max_len in zip(d, rng.uniform(1, 150, len(d))):
+        t0, s0 = G.first_hit(data, sensor[0], sensor[1], ca, sa, max_len, True)
+        t1, s1 = G.first_blocked(data, clear, G.CLEAR_SHIFT, sensor[0], sensor[1], ca, sa,
+                                 max_len)
+        assert s1 == s0 and abs(t1 - t0) <= 1e-9 * max(1.0, t0)
+
+
+def scan_beams(rng, data, n, fov):
+    """A scan's beams: n evenly spaced over ``fov`` from a random heading, most of them long."""
+    height, width = data.shape
+    sensor = np.array([rng.uniform(0.3, 0.7) * width, rng.uniform(0.3, 0.7) * height, 0.0])
+    a = rng.uniform(-math.pi, math.pi) + fov / n * np.arange(n)
+    r = np.where(rng.random(n) < 0.8, rng.uniform(30, 120, n), rng.uniform(0.5, 30, n))
+    return sensor, np.c_[sensor[0] + r * np.cos(a), sensor[1] + r * np.sin(a)]
+
+
+@pytest.mark.parametrize("seed, n, fov", [(0, 720, 2 * math.pi), (1, 360, 2 * math.pi),
+                                          (2, 1440, 2 * math.pi), (3, 181, math.pi),
+                                          (4, 1081, 1.5 * math.pi), (5, 720, 2 * math.pi)])
+def test_free_walks_that_skip_their_start_flag_the_cells_of_walks_from_the_sensor(seed, n,
+                                                                                  fov):
+    rng = np.random.default_rng(seed)
+    data, _ = open_map(rng, 240, 260)
+    sensor, hits = scan_beams(rng, data, n, fov)
+    select = np.where(rng.random(n) < (0.97 if seed < 5 else 0.6), K.UNCHANGED, K.CHANGE)
+    select = select.astype(np.int8)
+    reach = np.where(rng.random(n) < 0.9, 0.98, rng.uniform(-0.1, 1.0, n))
+    wrap = fov > 6.28
+    skips = np.zeros(n)
+    K.free_walk_skips(sensor, hits, reach, select, K.UNCHANGED, fov / n, wrap, 1000, skips)
+    walked = [reach[i] * math.dist(sensor[:2], hits[i]) for i in range(n)
+              if select[i] == K.UNCHANGED and reach[i] > 0]
+    assert skips.sum() > (0.05 if seed == 5 else 0.2) * sum(walked)
+    flagged = []
+    for skip in (K.NO_SKIPS, skips):
+        marks = np.zeros((data.size + 7) // 8, np.uint8)
+        out = np.zeros(data.size + 1, np.int32)
+        count = K.walk_beams(data, marks, K.NO_BLOCKS, sensor, hits, reach, select=select,
+                             want=K.UNCHANGED, drop_last=False, cap=1000, kind=K.WALK_FREE,
+                             marks=marks, out=out, n=0, skip=skip)
+        flagged.append(sorted(out[:count].tolist()))
+    assert flagged[0] == flagged[1] and len(flagged[0]) > 2000
 
 
 def test_a_walk_stops_at_the_cap_as_the_listed_walk_does():
@@ -134,9 +247,9 @@ def test_a_walk_stops_at_the_cap_as_the_listed_walk_does():
     sensor, hits = np.array([1.5, 10.5, 0.0]), np.array([[190.5, 10.5]])
     out = np.zeros(data.size + 1, np.int32)
     marks = np.zeros((data.size + 7) // 8, np.uint8)
-    n = K.walk_beams(data, marks, sensor, hits, np.ones(1), select=np.ones(1, np.bool_),
-                     want=True, drop_last=False, cap=25, kind=K.WALK_FREE, marks=marks, out=out,
-                     n=0)
+    n = K.walk_beams(data, marks, K.NO_BLOCKS, sensor, hits, np.ones(1),
+                     select=np.ones(1, np.bool_), want=True, drop_last=False, cap=25,
+                     kind=K.WALK_FREE, marks=marks, out=out, n=0, skip=K.NO_SKIPS)
     assert out[:n].tolist() == [10 * 200 + c for c in range(1, 26)]
 
 
@@ -163,7 +276,8 @@ def test_walks_into_unknown_space_match_the_plain_rule(seed):
     bits = np.packbits(enclosed.reshape(-1), bitorder="little")
     marks = np.zeros_like(bits)
     out = np.zeros(data.size + 1, np.int32)
-    n = K.flag_unknown_seen_through(data, bits, sensor, hits, ranges, expected, directions,
+    n = K.flag_unknown_seen_through(data, bits, steps.clear_blocks(data), sensor, hits, ranges,
+                                    expected, directions,
                                     found, short=short, marks=marks, cap=1000,
                                     into=np.zeros(len(hits), np.bool_),
                                     reach=np.zeros(len(hits)), out=out, n=0)

@@ -14,7 +14,8 @@ import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
 
-from gridmap._kernels import NO_HIT, find_root, first_hit, segment_start, traverse
+from gridmap._kernels import (CLEAR_SHIFT, NO_HIT, clear_exit, find_root, first_blocked,
+                              segment_start, steps_to, traverse)
 from gridmap.cells import FREE, OCCUPIED, UNKNOWN
 
 from .hit_tiles import TILE_SHIFT as HIT_TILE_SHIFT
@@ -134,14 +135,15 @@ def beam_endpoints(ranges, valid, sensor, directions, res, out_hits):
 
 
 @njit(cache=True)
-def cast_virtual(ref, sensor, directions, max_len, out_expected, out_found):
+def cast_virtual(ref, clear, sensor, directions, max_len, out_expected, out_found):
     """Cast the virtual beams once: beam j from the sensor along ``directions[j]`` ends at the
     first occupied-or-unknown cell of ``ref``, or where it leaves the map (outside is unknown);
-    ``out_found[j]`` is False when nothing blocks it within ``max_len`` grid units."""
+    ``out_found[j]`` is False when nothing blocks it within ``max_len`` grid units. ``clear``:
+    ``clear_blocks`` of ``ref`` (blocks of 2**CLEAR_SHIFT cells), crossed in jumps."""
     gx0, gy0 = sensor[0], sensor[1]
     for j in range(directions.shape[0]):
         ca, sa = directions[j, 0], directions[j, 1]
-        t, status = first_hit(ref, gx0, gy0, ca, sa, max_len, True)
+        t, status = first_blocked(ref, clear, CLEAR_SHIFT, gx0, gy0, ca, sa, max_len)
         out_found[j] = status != NO_HIT
         out_expected[j, 0] = gx0 + t * ca
         out_expected[j, 1] = gy0 + t * sa
@@ -282,12 +284,12 @@ def prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio,
 
 
 @njit(cache=True)
-def classify_scan(ref, sensor, virtual, max_len, hits, valid, pairing, half_window, wrap,
+def classify_scan(ref, clear, sensor, virtual, max_len, hits, valid, pairing, half_window, wrap,
                   min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict,
                   min_width=0.0):
     """``cast_virtual``, ``classify``, ``run_filter`` and ``beam_verdicts`` in one call.
     Returns (detected changes, changes kept by the run filter)."""
-    cast_virtual(ref, sensor, virtual, max_len, out_expected, out_found)
+    cast_virtual(ref, clear, sensor, virtual, max_len, out_expected, out_found)
     raw = classify(hits, valid, pairing, out_expected, out_found, half_window, wrap, out_change)
     kept = run_filter(out_change, min_run, wrap, out_keep, hits, min_width)
     beam_verdicts(valid, out_keep, n_skip, wrap, out_verdict)
@@ -366,11 +368,14 @@ def flag_occupied_listed(ref, cells, count, marks, out, n):
 WALK_FREE = 0
 WALK_BLOCKED = 1
 WALK_OPEN_UNKNOWN = 2
+# walk_beams without its shortcuts: the plain walks the fused ones are checked against
+NO_BLOCKS = np.zeros((0, 0), np.uint8)
+NO_SKIPS = np.zeros(0, np.float64)
 
 
 @njit(cache=True)
-def walk_beams(ref, enclosed, sensor, hits, reach, select, want, drop_last, cap, kind, marks,
-               out, n):
+def walk_beams(ref, enclosed, clear, sensor, hits, reach, select, want, drop_last, cap, kind,
+               marks, out, n, skip):
     """``walk`` and the flagging of its cells in one pass, with no list of cells in between,
     for every beam i with ``select[i] == want`` and ``reach[i]`` > 0: append to ``out`` (from
     position n) the cells of its walk (at most ``cap`` of them, as ``walk`` lists at most that
@@ -379,7 +384,16 @@ def walk_beams(ref, enclosed, sensor, hits, reach, select, want, drop_last, cap,
     same tie-breaking. The flag goes in without a branch (``out[n]`` is written for every
     cell and kept only when the cell is taken, so ``out`` needs one slot to spare), and the
     loop over the beams holds the loop over the cells: no call per beam takes an array, each
-    of which would cost reference counting."""
+    of which would cost reference counting.
+
+    Two shortcuts leave the cells flagged as they are. A walk that flags no free cell jumps
+    across the square of clear blocks around its first cell (``clear``: ``clear_blocks`` of
+    ``ref``; empty: no jump), looked up once a walk: a walk through space M does not know
+    would pay for more lookups and gain nothing. A free walk starts ``skip[i]`` grid units
+    from the sensor (``free_walk_skips``: cells that other walks of the scan cross; an empty
+    ``skip``: none). Past a jump the walk's edges are sums in closed form, which can round
+    otherwise in the last bits than stepping: a cell where the segment passes within about
+    1e-12 of a corner can differ."""
     height, width = ref.shape
     flat = ref.reshape(-1)
     gx0, gy0 = sensor[0], sensor[1]
@@ -393,29 +407,94 @@ def walk_beams(ref, enclosed, sensor, hits, reach, select, want, drop_last, cap,
         count = min(n_x + n_y + 1, cap) if n_x >= 0 else 0
         if count > 0 and drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
             count -= 1
-        idx = cy * width + cx
-        row_step = step_y * width
-        for _ in range(count):
-            v = flat[idx]
-            b = idx >> 3
-            bit = np.uint8(1 << (idx & 7))
-            if kind == WALK_FREE:
-                wanted = v == FREE
-            elif kind == WALK_BLOCKED:
-                wanted = v != FREE
-            else:       # open unknown: unknown, and not in an enclosed region
-                wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
-            old = marks[b]
-            take = wanted & ((old & bit) == 0)
-            marks[b] = old | (bit if take else np.uint8(0))
-            out[n] = idx
-            n += take
-            go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
-            idx += step_x if go_x else row_step
-            n_x -= 1 if go_x else 0
-            n_y -= 0 if go_x else 1
-            t_max_x = t_max_x + t_delta_x if go_x else t_max_x
-            t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+        p = -1.0
+        if kind != WALK_FREE and clear.shape[0] > 0:
+            # the square of clear blocks around the sensor, with a margin inside it: the
+            # jump's closed-form sums may round either way
+            p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y,
+                               t_delta_x, t_delta_y), 1.0) - 1e-9
+        elif skip.shape[0] and skip[i] > 0.0 and count == n_x + n_y + 1:
+            p = min(skip[i] / math.hypot(tx - gx0, ty - gy0), 1.0 - 1e-9)
+        if p > t_max_x or p > t_max_y:
+            kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
+            kx, ky = min(kx, n_x), min(ky, n_y)
+            cx, cy, n_x, n_y, count = cx + kx * step_x, cy + ky * step_y, n_x - kx, n_y - ky, \
+                count - kx - ky
+            t_max_x, t_max_y = t_max_x + kx * t_delta_x, t_max_y + ky * t_delta_y
+        n = _walk_cells(flat, enclosed, kind, cy * width + cx, n_x, n_y, count, step_x,
+                        step_y * width, t_delta_x, t_delta_y, t_max_x, t_max_y, marks, out, n)
+    return n
+
+
+@njit(cache=True)
+def free_walk_skips(sensor, hits, reach, select, want, increment, wrap, cap, out):
+    """Per beam i whose free walk runs (as ``walk_beams`` selects them): how far from the
+    sensor (grid units) its walk may start and the scan's free walks still flag the very cells
+    that walks from the sensor flag. ``increment``: the angle between two beams (0: no
+    skips); ``wrap``: the beams cover 360 degrees, beam n following beam n - 1 by that angle.
+
+    Beam i = 2**l * odd lies between beams i - 2**l and i + 2**l, which both rank higher
+    (divide by 2**(l+1); beam 0 ranks highest). A cell that i's walk enters within r of the
+    sensor has its far corner within r + sqrt(2). Seen from the sensor along direction phi, a
+    unit square is w = |cos phi| + |sin phi| wide across, so it spans an angle of about
+    w / (r + sqrt(2)) (2 atan(w / 2 rho) exactly, rho its far corner's distance). While that
+    exceeds the two beams' spacing s = 2**(l+1) * increment, one of the two crosses the cell
+    strictly inside, and flags it if it walks past r + sqrt(2). So i may skip to r when both
+    walk that far; by induction from beam 0, which skips nothing, every cell a walk skips is
+    flagged by a walk that does not. The width is taken at i's direction less sqrt(2) s (the
+    cell's bisector lies within s of it when the span is below 2 s) and at least 1; a tenth
+    of the spacing is kept in hand, which also covers atan's shortfall."""
+    n = hits.shape[0]
+    gx0, gy0 = sensor[0], sensor[1]
+    for i in range(n):
+        out[i] = 0.0
+        if i == 0 or not increment > 0.0 or select[i] != want or not reach[i] > 0.0:
+            continue
+        low = i & -i
+        s = 2 * low * increment
+        dx, dy = hits[i, 0] - gx0, hits[i, 1] - gy0
+        w = max(1.0, (abs(dx) + abs(dy)) / max(math.hypot(dx, dy), 1e-300) - 1.5 * s)
+        r = 0.9 * w / s - 1.5
+        for j in (i - low, i + low):
+            if j >= n:
+                j = j - n if wrap else -1
+            if j < 0 or (j != 0 and (j & -j) <= low) or select[j] != want \
+                    or not reach[j] > 0.0:
+                r = 0.0
+                break
+            length = reach[j] * math.hypot(hits[j, 0] - gx0, hits[j, 1] - gy0)
+            if 2.0 * length + 4.0 > cap:
+                r = 0.0
+                break
+            r = min(r, length - 1.5)
+        out[i] = max(r, 0.0)
+
+
+@njit(cache=True, inline="always")
+def _walk_cells(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step, t_delta_x,
+                t_delta_y, t_max_x, t_max_y, marks, out, n):
+    """``count`` cells of a walk from cell ``idx``: flag those of ``kind`` not yet marked."""
+    for _ in range(count):
+        v = flat[idx]
+        b = idx >> 3
+        bit = np.uint8(1 << (idx & 7))
+        if kind == WALK_FREE:
+            wanted = v == FREE
+        elif kind == WALK_BLOCKED:
+            wanted = v != FREE
+        else:       # open unknown: unknown, and not in an enclosed region
+            wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
+        old = marks[b]
+        take = wanted & ((old & bit) == 0)
+        marks[b] = old | (bit if take else np.uint8(0))
+        out[n] = idx
+        n += take
+        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
+        idx += step_x if go_x else row_step
+        n_x -= 1 if go_x else 0
+        n_y -= 0 if go_x else 1
+        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
+        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
     return n
 
 
@@ -442,9 +521,9 @@ def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out)
     beam i, all but the last, where p_th lies ``reach[i]`` of the way to the hit (none when
     ``reach[i]`` <= 0: the skip reaches back to the sensor); each cell once (``marks``: cells
     marked already, as seen surfaces are, get no flag). Returns the count."""
-    return walk_beams(ref, marks, sensor, hits, reach, select=verdict, want=CHANGE,
+    return walk_beams(ref, marks, NO_BLOCKS, sensor, hits, reach, select=verdict, want=CHANGE,
                       drop_last=True, cap=cells.shape[1], kind=WALK_BLOCKED, marks=marks, out=out,
-                      n=0)
+                      n=0, skip=NO_SKIPS)
 
 
 @njit(cache=True)
@@ -533,9 +612,9 @@ def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
 def flag_free_unchanged(ref, sensor, hits, reach, verdict, marks, cells, out):
     """Free: the free cells of ``ref`` from the sensor to ``reach[i]`` of the way to the hit of
     each UNCHANGED beam i; each cell once (``marks``). Returns the count."""
-    return walk_beams(ref, marks, sensor, hits, reach, select=verdict, want=UNCHANGED,
+    return walk_beams(ref, marks, NO_BLOCKS, sensor, hits, reach, select=verdict, want=UNCHANGED,
                       drop_last=False, cap=cells.shape[1], kind=WALK_FREE, marks=marks, out=out,
-                      n=0)
+                      n=0, skip=NO_SKIPS)
 
 
 @njit(cache=True)
@@ -620,19 +699,19 @@ def flag_open_unknown_walks(ref, enclosed, sensor, hits, reach, into_unknown, ma
     sensor to ``reach[i]`` of the way to the hit of each beam i that looks into unknown space
     (``into_unknown[i]``), all but the last; each cell once (``marks``). Returns the new
     count."""
-    return walk_beams(ref, enclosed, sensor, hits, reach, select=into_unknown, want=True,
-                      drop_last=True, cap=cells.shape[1], kind=WALK_OPEN_UNKNOWN, marks=marks,
-                      out=out, n=n)
+    return walk_beams(ref, enclosed, NO_BLOCKS, sensor, hits, reach, select=into_unknown,
+                      want=True, drop_last=True, cap=cells.shape[1], kind=WALK_OPEN_UNKNOWN,
+                      marks=marks, out=out, n=n, skip=NO_SKIPS)
 
 
 @njit(cache=True)
-def flag_unknown_seen_through(ref, enclosed, sensor, hits, ranges, expected, directions,
+def flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expected, directions,
                               found, short, marks, cap, into, reach, out, n):
     """``flag_open_unknown_walks`` for the valid beams whose expected ray ends at an unknown
     cell (``ends_in_unknown`` of their ``expected`` point, ``directions`` and ``found``, one
     row per beam), each walking to ``short`` [m] short of its hit (beams no longer than that
-    walk nowhere); ``into`` and ``reach`` get which beams walk and how far. Returns the new
-    count."""
+    walk nowhere); ``into`` and ``reach`` get which beams walk and how far. ``clear``: as
+    ``walk_beams`` takes it. Returns the new count."""
     height, width = ref.shape
     for i in range(hits.shape[0]):
         r = ranges[i]
@@ -646,9 +725,9 @@ def flag_unknown_seen_through(ref, enclosed, sensor, hits, ranges, expected, dir
             continue
         into[i] = True
         reach[i] = 1.0 - short / r
-    return walk_beams(ref, enclosed, sensor, hits, reach, select=into, want=True,
+    return walk_beams(ref, enclosed, clear, sensor, hits, reach, select=into, want=True,
                       drop_last=True, cap=cap, kind=WALK_OPEN_UNKNOWN, marks=marks, out=out,
-                      n=n)
+                      n=n, skip=NO_SKIPS)
 
 
 @njit(cache=True)
@@ -763,11 +842,11 @@ def apply_drawn(drawn, out):
 
 # --- steps 2 and 3 in one call ----------------------------------------------------------------
 @njit(cache=True)
-def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_select, removed_reach, tol,
-              free_reach,
-              expected, directions, found, guard, unknown_guard, grow, short, gaps, margin,
-              confirm, cap, ch_marks, un_marks, hit_marks, protected, hits_unknown, into,
-              unknown_reach, changed, unchanged):
+def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_select,
+              removed_reach, tol, free_reach, expected, directions, found, guard,
+              unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap, skips,
+              ch_marks, un_marks, hit_marks, protected, hits_unknown, into, unknown_reach,
+              changed, unchanged):
     """The flags of a scan past the lost check, in the order of ``MapUpdater``'s steps
     (``updater.steps``), each kernel as its step calls it: the seen-surface guard (radius
     ``guard``, 0: none), the unknown cells hit (``grow``), the removed- and new-obstacle
@@ -775,20 +854,23 @@ def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_select, remo
     ``gaps``, 0: off; the free walks then reach to ``margin`` short of the hit where that is
     further), the unchanged flags, the hits that confirm M's surfaces (``confirm``), and the
     unknown hits' marks released. One call instead of a dozen: each call from Python has a
-    fixed cost. Returns (changed flags, new-obstacle flags, fill_gaps flags, unchanged flags,
-    unknown cells hit)."""
+    fixed cost. The walks take ``walk_beams``' shortcuts: ``clear`` (``clear_blocks`` of
+    ``ref``) and the free walks' ``free_walk_skips`` (``increment``, ``wrap``), written to the
+    scratch ``skips``. Returns (changed flags, new-obstacle flags, fill_gaps flags, unchanged
+    flags, unknown cells hit)."""
     n_guarded = 0
     if guard > 0.0:
         n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
                                        ch_marks, protected)
     n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
                                hits_unknown) if grow else 0
-    n = walk_beams(ref, ch_marks, sensor, hits, removed_reach, select=removed_select, want=CHANGE,
-                   drop_last=True, cap=cap, kind=WALK_BLOCKED, marks=ch_marks, out=changed, n=0)
+    n = walk_beams(ref, ch_marks, clear, sensor, hits, removed_reach, select=removed_select,
+                   want=CHANGE, drop_last=True, cap=cap, kind=WALK_BLOCKED, marks=ch_marks,
+                   out=changed, n=0, skip=NO_SKIPS)
     n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n)
     n_new = n_ch - n
     if grow:
-        n_ch = flag_unknown_seen_through(ref, enclosed, sensor, hits, ranges, expected,
+        n_ch = flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expected,
                                          directions, found, short, ch_marks, cap, into,
                                          unknown_reach, changed, n_ch)
     clear_bits(ch_marks, protected, n_guarded)
@@ -799,9 +881,10 @@ def flag_scan(ref, enclosed, sensor, hits, ranges, verdict, removed_select, remo
         for i in range(ranges.shape[0]):
             if margin > 0.0 and margin < ranges[i]:
                 free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
-    n_un = walk_beams(ref, un_marks, sensor, hits, free_reach, select=verdict, want=UNCHANGED,
-                      drop_last=False, cap=cap, kind=WALK_FREE, marks=un_marks, out=unchanged,
-                      n=0)
+    free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
+    n_un = walk_beams(ref, un_marks, clear, sensor, hits, free_reach, select=verdict,
+                      want=UNCHANGED, drop_last=False, cap=cap, kind=WALK_FREE, marks=un_marks,
+                      out=unchanged, n=0, skip=skips)
     n_un = flag_occupied_unchanged(ref, hits, verdict, un_marks, unchanged, n_un)
     if confirm:
         n_un = flag_hit_surfaces(ref, hits, verdict, un_marks, unchanged, n_un)

@@ -130,6 +130,8 @@ class MapUpdater:
         self.config = config
         self._ref = np.ascontiguousarray(reference_map.data, dtype=np.int8).copy()
         self._ref.flags.writeable = False
+        # where M is free in whole blocks: the casts and walks cross those in jumps
+        self._clear = steps.clear_blocks(self._ref)
         self._res = reference_map.resolution
         self._origin = reference_map.origin
         self._hist = np.zeros(self._ref.shape, np.uint16)
@@ -185,7 +187,7 @@ class MapUpdater:
             return ScanReport(t, status, reason, changed_cells=self._n_changed,
                               sensor_pose=placed)
 
-        beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws)
+        beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws, self._clear)
         self._counts["processed"] += 1
         report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
                       raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy(),
@@ -230,7 +232,7 @@ class MapUpdater:
         sensor = steps.to_grid(sensor_pose, self._origin, self._res)
         if not cfg.gate_confirm or not self._on_map(sensor):
             return 0
-        beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws)
+        beams = steps.classify_beams(ref, scan, sensor, self._res, cfg, ws, self._clear)
         if steps.is_lost(beams, cfg, ref):
             return 0
         n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
@@ -380,8 +382,8 @@ class MapUpdater:
 
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
-        arrays = (self._ref, self._hist, self._seen, self._decided, self._ch_marks,
-                  self._un_marks, self._enclosed, self._drawn, self._hit_marks)
+        arrays = (self._ref, self._clear, self._hist, self._seen, self._decided,
+                  self._ch_marks, self._un_marks, self._enclosed, self._drawn, self._hit_marks)
         return sum(a.nbytes for a in arrays) + self._hits.nbytes + self._ws.nbytes()
 
     # --- stop and resume ----------------------------------------------------------------------

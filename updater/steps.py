@@ -68,6 +68,11 @@ class Beams:
     change: np.ndarray | None = None
     # the removed-obstacle walk's reach, 1 - skip / r; None: computed from the two
     removed_reach: np.ndarray | None = None
+    # for the walks' shortcuts: M's clear blocks (clear_blocks), the angle between two beams
+    # [rad] and whether they cover 360 degrees, beam 0 following the last by that angle
+    clear: np.ndarray | None = None
+    increment: float = 0.0
+    wrap: bool = False
 
 
 class Workspace:
@@ -93,7 +98,8 @@ class Workspace:
             self.verdict = np.zeros(n, np.int8)
             self.measured = np.zeros((n, 2), np.float64)
             self.into = np.zeros(n, np.bool_)
-            for name in ("pairing", "tol", "skip", "reach", "free_reach", "unknown_reach"):
+            for name in ("pairing", "tol", "skip", "reach", "free_reach", "unknown_reach",
+                         "skips"):
                 setattr(self, name, np.zeros(n, np.float64))
         if m != self._virtual:
             self._virtual = m
@@ -144,6 +150,17 @@ def to_grid(sensor_pose, origin, res) -> np.ndarray:
                      sensor_pose.theta], dtype=np.float64)
 
 
+def clear_blocks(ref: np.ndarray) -> np.ndarray:
+    """The clear blocks of M that casts and walks jump across (``gridmap._kernels``'
+    ``clear_blocks``, blocks of 2**CLEAR_SHIFT cells): 1/16 byte a cell."""
+    from gridmap import _kernels as grid
+
+    size = 1 << grid.CLEAR_SHIFT
+    out = np.zeros((-(-ref.shape[0] // size), -(-ref.shape[1] // size)), np.uint8)
+    grid.clear_blocks(ref, grid.CLEAR_SHIFT, out)
+    return out
+
+
 # --- 1. beam classifier -----------------------------------------------------------------------
 def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
     """The range-dependent distances of docs/algorithm.md for every beam, from the config: D(r_i)
@@ -153,15 +170,17 @@ def beam_distances(ranges: np.ndarray, res: float, cfg: UpdaterConfig):
 
 
 def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
-                   cfg: UpdaterConfig, ws: Workspace) -> Beams:
+                   cfg: UpdaterConfig, ws: Workspace, clear: np.ndarray | None = None) -> Beams:
     """Valid beams, hit points, the per-beam distances, virtual beams cast once each, the
     windowed comparison with D(r), the run filter and the N_skip neighbourhood of the changes.
     The window and the run filter wrap around the scan's ends only when the scan covers 360
     degrees. Two kernel calls: the per-beam inputs (``prepare_beams``: valid beams, hit
     points, the distances of ``beam_distances``), then the classifier (``classify_scan``). A
     beam is invalid when its range is not finite, not above 0 (r = 0 is no hit), below the
-    scan's range_min, or at or beyond min(max_range, the scan's range_max)."""
+    scan's range_min, or at or beyond min(max_range, the scan's range_max). ``clear``: M's
+    ``clear_blocks`` (None: worked out here)."""
     k = kernels()
+    clear = clear_blocks(ref) if clear is None else clear
     n = scan.beams
     ratio = cfg.virtual_to_measured_ratio
     r_hi = min(cfg.max_range, scan.range_max)
@@ -182,7 +201,7 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     half = n * ratio if span >= n * ratio else int(math.floor(span + 1e-9))
     wrap = scan.covers_full_circle()
     raw, kept = k.classify_scan(
-        ref, sensor, virtual=ws.virtual, max_len=max_len, hits=ws.hits, valid=ws.valid,
+        ref, clear, sensor, virtual=ws.virtual, max_len=max_len, hits=ws.hits, valid=ws.valid,
         pairing=ws.pairing, half_window=half, wrap=wrap, min_run=cfg.min_run,
         n_skip=cfg.n_skip, out_expected=ws.expected, out_found=ws.found, out_change=ws.change,
         out_keep=ws.keep, out_verdict=ws.verdict, min_width=cfg.min_run_width / res)
@@ -190,9 +209,12 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     # for an unchanged flag at each beam's hit cell.
     ws.for_flags(min(bound, ref.size) + n)
     own = slice(None, None, ratio) if ratio != 1 else slice(None)
+    # the free walks' skips count on even spacing, across the scan's ends too
+    even = wrap and abs(scan.fov() - 2 * math.pi) <= 0.05 * abs(scan.angle_increment)
     return Beams(sensor, ws.r, ws.hits, ws.pairing, ws.tol, ws.skip, ws.free_reach,
                  ws.verdict, n_valid, raw, kept, ws.expected[own][:n], ws.found[own][:n],
-                 ws.virtual[own][:n], ws.change, ws.reach)
+                 ws.virtual[own][:n], ws.change, ws.reach, clear, abs(scan.angle_increment),
+                 even)
 
 
 def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
@@ -392,7 +414,7 @@ def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarra
     the corners M had as unknown. Returns the new count."""
     short = max(cfg.seen_surface_radius, res)
     return int(kernels().flag_unknown_seen_through(
-        ref, enclosed, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
+        ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
         expected=beams.own_expected, directions=beams.own_direction, found=beams.own_found,
         short=short, marks=marks, cap=ws.cells.shape[1], into=ws.into, reach=ws.unknown_reach,
         out=ws.changed, n=n))
@@ -455,7 +477,7 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     ch_marks, un_marks, hit_marks = marks
     gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
     n_ch, n_new, n_gaps, n_un, n_hits = kernels().flag_scan(
-        ref, enclosed, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
+        ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
         verdict=beams.verdict, removed_select=removed_select(beams, cfg),
         removed_reach=removed_reach(beams), tol=beams.tol,
         free_reach=beams.free_reach, expected=beams.own_expected,
@@ -463,7 +485,8 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
         unknown_guard=unknown_guard(cfg, res), grow=cfg.grow_into_unknown,
         short=max(cfg.seen_surface_radius, res), gaps=gaps, margin=cfg.fill_gaps_free_margin,
         confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
-        ch_marks=ch_marks, un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
+        increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
+        un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
         hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
         changed=ws.changed, unchanged=ws.unchanged)
     return int(n_ch), int(n_new + n_gaps), int(n_un), int(n_hits)

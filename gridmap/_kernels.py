@@ -214,7 +214,6 @@ def _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x, t_
 # --- clear blocks: free space crossed in one jump -------------------------------------------
 # A walk through free space needs no look at each cell: where a square of blocks around the
 # walk's cell holds only free cells, ``steps_to`` moves the walk to the square's edge at once.
-CLEAR_SHIFT = 2         # blocks of 4 x 4 cells: 1/16 byte a cell
 
 
 @njit(cache=True)
@@ -306,21 +305,24 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
     while True:
         if data[cy, cx] != FREE:
             return t, HIT
-        # the blocks looked up every fourth cell, with a margin inside the square: the jump's
-        # closed-form sums may round either way
+        # the blocks looked up every fourth cell and a jump taken when it crosses a few
+        # cells at least (a cast through clutter pays little for them), with a margin inside
+        # the square: the jump's closed-form sums may round either way
         k += 1
-        p = min(clear_exit(clear, shift, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
-                           t_delta_y), t_safe) - 1e-6 if (k & 3) == 1 else -1.0
-        if p > t_max_x or p > t_max_y:
-            kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
-            if kx > 0:
-                t = max(t, t_max_x + (kx - 1) * t_delta_x)
-                t_max_x += kx * t_delta_x
-                cx += kx * step_x
-            if ky > 0:
-                t = max(t, t_max_y + (ky - 1) * t_delta_y)
-                t_max_y += ky * t_delta_y
-                cy += ky * step_y
+        if (k & 3) == 1:
+            p = min(clear_exit(clear, shift, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
+                               t_delta_y), t_safe) - 1e-6
+            if p > t + 6.0:
+                kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
+                if kx > 0:
+                    t = max(t, t_max_x + (kx - 1) * t_delta_x)
+                    t_max_x += kx * t_delta_x
+                    cx += kx * step_x
+                if ky > 0:
+                    t = max(t, t_max_y + (ky - 1) * t_delta_y)
+                    t_max_y += ky * t_delta_y
+                    cy += ky * step_y
+                k = 0       # and look again from where it lands
         if t_max_x <= t_max_y:
             if t_max_x >= t_safe:
                 break

@@ -14,12 +14,16 @@ import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
 
-from gridmap._kernels import (CLEAR_SHIFT, NO_HIT, clear_exit, find_root, first_blocked,
+from gridmap._kernels import (NO_HIT, clear_exit, find_root, first_blocked,
                               segment_start, steps_to, traverse)
 from gridmap.cells import FREE, OCCUPIED, UNKNOWN
 
 from .hit_tiles import TILE_SHIFT as HIT_TILE_SHIFT
 from .verdicts import BeamVerdict
+
+# The blocks of ``clear_blocks`` (gridmap): 8 x 8 cells, 1/64 byte a cell. Here, not in gridmap:
+# numba compiles it in, and a cached kernel is compiled again only when its own file changes.
+CLEAR_SHIFT = 3
 
 # The per-beam verdicts as plain ints, which numba compiles in as constants.
 INVALID = int(BeamVerdict.INVALID)
@@ -712,8 +716,17 @@ def flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expect
     row per beam), each walking to ``short`` [m] short of its hit (beams no longer than that
     walk nowhere); ``into`` and ``reach`` get which beams walk and how far. ``clear``: as
     ``walk_beams`` takes it. Returns the new count."""
+    unknown_walks(ref, ranges, expected, directions, found, short, into, reach)
+    return walk_beams(ref, enclosed, clear, sensor, hits, reach, select=into, want=True,
+                      drop_last=True, cap=cap, kind=WALK_OPEN_UNKNOWN, marks=marks, out=out,
+                      n=n, skip=NO_SKIPS)
+
+
+@njit(cache=True)
+def unknown_walks(ref, ranges, expected, directions, found, short, into, reach):
+    """Which beams ``flag_unknown_seen_through`` walks (``into``) and how far (``reach``)."""
     height, width = ref.shape
-    for i in range(hits.shape[0]):
+    for i in range(ranges.shape[0]):
         r = ranges[i]
         into[i] = False
         reach[i] = 0.0
@@ -725,9 +738,6 @@ def flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expect
             continue
         into[i] = True
         reach[i] = 1.0 - short / r
-    return walk_beams(ref, enclosed, clear, sensor, hits, reach, select=into, want=True,
-                      drop_last=True, cap=cap, kind=WALK_OPEN_UNKNOWN, marks=marks, out=out,
-                      n=n, skip=NO_SKIPS)
 
 
 @njit(cache=True)
@@ -840,6 +850,177 @@ def apply_drawn(drawn, out):
                 out[idx] = OCCUPIED
 
 
+# --- all the walks of a scan, one per beam ---------------------------------------------------
+# A beam may walk twice: a detected change to free the removed obstacle, or an agreeing beam to
+# confirm free space, and again into the unknown space it sees through. One traversal to the
+# further end flags for both: the removed-obstacle walk's kind (occupied or unknown) holds the
+# open unknown; an agreeing beam's cells are free (an unchanged flag) or open unknown (a changed
+# one), never both.
+WALK_FREE_AND_UNKNOWN = 3
+
+
+@njit(cache=True, inline="always")
+def _walk_count(gx0, gy0, hit, reach, drop_last, cap, height, width):
+    """The cells ``walk_beams`` walks for one beam: to ``reach`` of the way to ``hit``."""
+    tx = gx0 + reach * (hit[0] - gx0)
+    ty = gy0 + reach * (hit[1] - gy0)
+    start = segment_start(gx0, gy0, tx, ty, height, width)
+    n_x, n_y = start[2], start[3]
+    count = min(n_x + n_y + 1, cap) if n_x >= 0 else 0
+    if count > 0 and drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
+        count -= 1
+    return count
+
+
+@njit(cache=True)
+def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach, verdict,
+              free_reach, skips, into, unknown_reach, cap, ch_marks, un_marks, changed, n_ch,
+              unchanged, n_un):
+    """The removed-obstacle walks (``removed_select`` CHANGE), the free walks (``verdict``
+    UNCHANGED) and the walks into unknown space (``into``) of ``walk_beams``, each beam walked
+    once to the furthest of its ends: changed flags into ``changed`` after n_ch (marks
+    ``ch_marks``), unchanged ones into ``unchanged`` after n_un (``un_marks``). The flags are
+    those of the walks one after the other, up to the order of the lists and to the cells
+    where a segment passes within about 1e-12 of a corner (the shorter walk's cells are taken
+    as the first ones of the longer). ``skips``: ``free_walk_skips``, used by the beams that
+    walk free space only. Returns (n_ch, n_un)."""
+    height, width = ref.shape
+    flat = ref.reshape(-1)
+    gx0, gy0 = sensor[0], sensor[1]
+    for i in range(hits.shape[0]):
+        a = removed_select[i] == CHANGE and removed_reach[i] > 0.0
+        f = verdict[i] == UNCHANGED and free_reach[i] > 0.0
+        u = into[i] and unknown_reach[i] > 0.0
+        if not (a or f or u):
+            continue
+        reach = removed_reach[i] if a else (free_reach[i] if f else 0.0)
+        first = _walk_count(gx0, gy0, hits[i], reach, not f, cap, height, width) \
+            if a or f else 0
+        second = 0
+        if u:
+            second = _walk_count(gx0, gy0, hits[i], unknown_reach[i], True, cap, height,
+                                 width)
+            if not (a or f) or second > first:
+                reach = unknown_reach[i]
+        n_ch, n_un = _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hits[i],
+                                  reach, a, f, u, first, second, cap,
+                                  skips[i] if f and not u else 0.0, ch_marks, un_marks,
+                                  changed, n_ch, unchanged, n_un)
+    return n_ch, n_un
+
+
+@njit(cache=True, inline="always")
+def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, f, u, first,
+                 second, cap, skip, ch_marks, un_marks, changed, n_ch, unchanged, n_un):
+    """One beam of ``walk_scan``: the segment to ``reach`` of the way to ``hit``; the first
+    ``first`` cells flagged as its removed-obstacle (``a``) or free (``f``) walk flags them,
+    the first ``second`` as its walk into unknown space (``u``) does."""
+    tx = gx0 + reach * (hit[0] - gx0)
+    ty = gy0 + reach * (hit[1] - gy0)
+    cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
+        segment_start(gx0, gy0, tx, ty, height, width)
+    p = -1.0
+    done = 0
+    if not f and clear.shape[0] > 0:
+        # the square of clear blocks around the sensor, with a margin inside it: the jump's
+        # closed-form sums may round either way
+        p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
+                           t_delta_y), 1.0) - 1e-9
+    elif skip > 0.0 and first == n_x + n_y + 1:
+        p = min(skip / math.hypot(tx - gx0, ty - gy0), 1.0 - 1e-9)
+    if p > t_max_x or p > t_max_y:
+        kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
+        kx, ky = min(kx, n_x), min(ky, n_y)
+        cx, cy, n_x, n_y, done = cx + kx * step_x, cy + ky * step_y, n_x - kx, n_y - ky, kx + ky
+        t_max_x, t_max_y = t_max_x + kx * t_delta_x, t_max_y + ky * t_delta_y
+    idx = cy * width + cx
+    row_step = step_y * width
+    both = min(first, second) if (a or f) and u else 0
+    rest = max(first, second) if u else first
+    later = WALK_OPEN_UNKNOWN if second > first or not (a or f) else \
+        (WALK_BLOCKED if a else WALK_FREE)
+    # the common cells: an agreeing beam's two kinds, or the removed walk's (which hold the
+    # open unknown); then the longer walk's alone
+    if f and both > done:
+        n_ch, n_un, idx, n_x, n_y, t_max_x, t_max_y = _walk_free_and_unknown(
+            flat, enclosed, idx, n_x, n_y, both - done, step_x, row_step, t_delta_x,
+            t_delta_y, t_max_x, t_max_y, ch_marks, un_marks, changed, n_ch, unchanged, n_un)
+        done = both
+    if later == WALK_FREE:
+        n_un = _walk_cells(flat, enclosed, WALK_FREE, idx, n_x, n_y, rest - done, step_x,
+                           row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, un_marks,
+                           unchanged, n_un)
+    elif a and later == WALK_OPEN_UNKNOWN and first > done:
+        n_ch, idx, n_x, n_y, t_max_x, t_max_y = _walk_cells_on(
+            flat, enclosed, WALK_BLOCKED, idx, n_x, n_y, first - done, step_x, row_step,
+            t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks, changed, n_ch)
+        n_ch = _walk_cells(flat, enclosed, later, idx, n_x, n_y, rest - first, step_x,
+                           row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
+                           changed, n_ch)
+    else:
+        n_ch = _walk_cells(flat, enclosed, later, idx, n_x, n_y, rest - done, step_x,
+                           row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
+                           changed, n_ch)
+    return n_ch, n_un
+
+
+@njit(cache=True, inline="always")
+def _walk_cells_on(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step, t_delta_x,
+                   t_delta_y, t_max_x, t_max_y, marks, out, n):
+    """``_walk_cells``, returning where the walk stands after it: (n, idx, n_x, n_y, t_max_x,
+    t_max_y)."""
+    for _ in range(count):
+        v = flat[idx]
+        b = idx >> 3
+        bit = np.uint8(1 << (idx & 7))
+        if kind == WALK_FREE:
+            wanted = v == FREE
+        elif kind == WALK_BLOCKED:
+            wanted = v != FREE
+        else:
+            wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
+        old = marks[b]
+        take = wanted & ((old & bit) == 0)
+        marks[b] = old | (bit if take else np.uint8(0))
+        out[n] = idx
+        n += take
+        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
+        idx += step_x if go_x else row_step
+        n_x -= 1 if go_x else 0
+        n_y -= 0 if go_x else 1
+        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
+        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+    return n, idx, n_x, n_y, t_max_x, t_max_y
+
+
+@njit(cache=True, inline="always")
+def _walk_free_and_unknown(flat, enclosed, idx, n_x, n_y, count, step_x, row_step, t_delta_x,
+                           t_delta_y, t_max_x, t_max_y, ch_marks, un_marks, changed, n_ch,
+                           unchanged, n_un):
+    """``count`` cells of an agreeing beam's walk that also looks into unknown space: a free
+    cell gets an unchanged flag, an open unknown one a changed flag, each once."""
+    for _ in range(count):
+        v = flat[idx]
+        b = idx >> 3
+        bit = np.uint8(1 << (idx & 7))
+        if v == FREE:
+            if (un_marks[b] & bit) == 0:
+                un_marks[b] |= bit
+                unchanged[n_un] = idx
+                n_un += 1
+        elif v != OCCUPIED and (enclosed[b] & bit) == 0 and (ch_marks[b] & bit) == 0:
+            ch_marks[b] |= bit
+            changed[n_ch] = idx
+            n_ch += 1
+        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
+        idx += step_x if go_x else row_step
+        n_x -= 1 if go_x else 0
+        n_y -= 0 if go_x else 1
+        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
+        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+    return n_ch, n_un, idx, n_x, n_y, t_max_x, t_max_y
+
+
 # --- steps 2 and 3 in one call ----------------------------------------------------------------
 @njit(cache=True)
 def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_select,
@@ -847,44 +1028,44 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
               unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap, skips,
               ch_marks, un_marks, hit_marks, protected, hits_unknown, into, unknown_reach,
               changed, unchanged):
-    """The flags of a scan past the lost check, in the order of ``MapUpdater``'s steps
-    (``updater.steps``), each kernel as its step calls it: the seen-surface guard (radius
-    ``guard``, 0: none), the unknown cells hit (``grow``), the removed- and new-obstacle
-    flags, the walks into unknown space, the guard released, ``fill_gaps`` (clearance
-    ``gaps``, 0: off; the free walks then reach to ``margin`` short of the hit where that is
-    further), the unchanged flags, the hits that confirm M's surfaces (``confirm``), and the
-    unknown hits' marks released. One call instead of a dozen: each call from Python has a
-    fixed cost. The walks take ``walk_beams``' shortcuts: ``clear`` (``clear_blocks`` of
-    ``ref``) and the free walks' ``free_walk_skips`` (``increment``, ``wrap``), written to the
-    scratch ``skips``. Returns (changed flags, new-obstacle flags, fill_gaps flags, unchanged
-    flags, unknown cells hit)."""
+    """The flags of a scan past the lost check, as ``MapUpdater``'s steps (``updater.steps``)
+    give them one after the other: the seen-surface guard (radius ``guard``, 0: none), the
+    unknown cells hit (``grow``), the removed-obstacle walks, the new-obstacle flags, the walks
+    into unknown space, the guard released, ``fill_gaps`` (clearance ``gaps``, 0: off; the
+    free walks then reach to ``margin`` short of the hit where that is further), the free
+    walks, the unchanged flags of occupied cells, the hits that confirm M's surfaces
+    (``confirm``), and the unknown hits' marks released. One call instead of a dozen: each
+    call from Python has a fixed cost. The walks are ``walk_scan``'s, one per beam, before the
+    new-obstacle flags (a free hit cell: no walk flags one) and the guard's release (which the
+    free walks, whose marks are their own, do not see), with ``walk_beams``' shortcuts:
+    ``clear`` (``clear_blocks`` of ``ref``) and the free walks' ``free_walk_skips``
+    (``increment``, ``wrap``), written to the scratch ``skips``. Returns (changed flags,
+    new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells hit)."""
     n_guarded = 0
     if guard > 0.0:
         n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
                                        ch_marks, protected)
     n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
                                hits_unknown) if grow else 0
-    n = walk_beams(ref, ch_marks, clear, sensor, hits, removed_reach, select=removed_select,
-                   want=CHANGE, drop_last=True, cap=cap, kind=WALK_BLOCKED, marks=ch_marks,
-                   out=changed, n=0, skip=NO_SKIPS)
+    if grow:
+        unknown_walks(ref, ranges, expected, directions, found, short, into, unknown_reach)
+    else:
+        into[:] = False
+    if gaps > 0:
+        for i in range(ranges.shape[0]):
+            if margin > 0.0 and margin < ranges[i]:
+                free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
+    free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
+    n, n_un = walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
+                        verdict, free_reach, skips, into, unknown_reach, cap, ch_marks,
+                        un_marks, changed, 0, unchanged, 0)
     n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n)
     n_new = n_ch - n
-    if grow:
-        n_ch = flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expected,
-                                         directions, found, short, ch_marks, cap, into,
-                                         unknown_reach, changed, n_ch)
     clear_bits(ch_marks, protected, n_guarded)
     n_gaps = 0
     if gaps > 0:
         n_gaps = flag_gaps(ref, hits, verdict, gaps, ch_marks, changed, n_ch) - n_ch
         n_ch += n_gaps
-        for i in range(ranges.shape[0]):
-            if margin > 0.0 and margin < ranges[i]:
-                free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
-    free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
-    n_un = walk_beams(ref, un_marks, clear, sensor, hits, free_reach, select=verdict,
-                      want=UNCHANGED, drop_last=False, cap=cap, kind=WALK_FREE, marks=un_marks,
-                      out=unchanged, n=0, skip=skips)
     n_un = flag_occupied_unchanged(ref, hits, verdict, un_marks, unchanged, n_un)
     if confirm:
         n_un = flag_hit_surfaces(ref, hits, verdict, un_marks, unchanged, n_un)

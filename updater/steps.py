@@ -152,12 +152,12 @@ def to_grid(sensor_pose, origin, res) -> np.ndarray:
 
 def clear_blocks(ref: np.ndarray) -> np.ndarray:
     """The clear blocks of M that casts and walks jump across (``gridmap._kernels``'
-    ``clear_blocks``, blocks of 2**CLEAR_SHIFT cells): 1/16 byte a cell."""
+    ``clear_blocks``, blocks of 2**CLEAR_SHIFT cells): 1/64 byte a cell."""
     from gridmap import _kernels as grid
 
-    size = 1 << grid.CLEAR_SHIFT
-    out = np.zeros((-(-ref.shape[0] // size), -(-ref.shape[1] // size)), np.uint8)
-    grid.clear_blocks(ref, grid.CLEAR_SHIFT, out)
+    shift = kernels().CLEAR_SHIFT
+    out = np.zeros((-(-ref.shape[0] >> shift), -(-ref.shape[1] >> shift)), np.uint8)
+    grid.clear_blocks(ref, shift, out)
     return out
 
 

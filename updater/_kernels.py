@@ -893,14 +893,13 @@ def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
         u = into[i] and unknown_reach[i] > 0.0
         if not (a or f or u):
             continue
-        reach = removed_reach[i] if a else (free_reach[i] if f else 0.0)
-        first = _walk_count(gx0, gy0, hits[i], reach, not f, cap, height, width) \
-            if a or f else 0
-        second = 0
-        if u:
+        reach = removed_reach[i] if a else (free_reach[i] if f else unknown_reach[i])
+        first = second = -1     # a single walk: its own cells, counted where it is walked
+        if u and (a or f):
+            first = _walk_count(gx0, gy0, hits[i], reach, not f, cap, height, width)
             second = _walk_count(gx0, gy0, hits[i], unknown_reach[i], True, cap, height,
                                  width)
-            if not (a or f) or second > first:
+            if second > first:
                 reach = unknown_reach[i]
         n_ch, n_un = _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hits[i],
                                   reach, a, f, u, first, second, cap,
@@ -914,11 +913,17 @@ def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, 
                  second, cap, skip, ch_marks, un_marks, changed, n_ch, unchanged, n_un):
     """One beam of ``walk_scan``: the segment to ``reach`` of the way to ``hit``; the first
     ``first`` cells flagged as its removed-obstacle (``a``) or free (``f``) walk flags them,
-    the first ``second`` as its walk into unknown space (``u``) does."""
+    the first ``second`` as its walk into unknown space (``u``) does (-1 for a beam with one
+    walk: that walk's own cells)."""
     tx = gx0 + reach * (hit[0] - gx0)
     ty = gy0 + reach * (hit[1] - gy0)
     cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
         segment_start(gx0, gy0, tx, ty, height, width)
+    if first < 0:       # one walk (the free walk keeps its last cell)
+        own = min(n_x + n_y + 1, cap) if n_x >= 0 else 0
+        if own > 0 and not f and 0.0 <= tx < width and 0.0 <= ty < height:
+            own -= 1
+        first, second = (own, 0) if a or f else (0, own)
     p = -1.0
     done = 0
     if not f and clear.shape[0] > 0:

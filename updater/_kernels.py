@@ -478,28 +478,8 @@ def free_walk_skips(sensor, hits, reach, select, want, increment, wrap, cap, out
 def _walk_cells(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step, t_delta_x,
                 t_delta_y, t_max_x, t_max_y, marks, out, n):
     """``count`` cells of a walk from cell ``idx``: flag those of ``kind`` not yet marked."""
-    for _ in range(count):
-        v = flat[idx]
-        b = idx >> 3
-        bit = np.uint8(1 << (idx & 7))
-        if kind == WALK_FREE:
-            wanted = v == FREE
-        elif kind == WALK_BLOCKED:
-            wanted = v != FREE
-        else:       # open unknown: unknown, and not in an enclosed region
-            wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
-        old = marks[b]
-        take = wanted & ((old & bit) == 0)
-        marks[b] = old | (bit if take else np.uint8(0))
-        out[n] = idx
-        n += take
-        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
-        idx += step_x if go_x else row_step
-        n_x -= 1 if go_x else 0
-        n_y -= 0 if go_x else 1
-        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
-        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
-    return n
+    return _walk_cells_on(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step,
+                          t_delta_x, t_delta_y, t_max_x, t_max_y, marks, out, n)[0]
 
 
 # --- 2. changed-cells evaluator ---------------------------------------------------------------

@@ -288,7 +288,9 @@ def steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y):
 def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
     """``first_hit`` with unknown blocking (the map's outside too), jumping across squares
     of clear blocks (``clear_blocks(data, shift, clear)``) instead of stepping through their
-    cells: the same blocking cell, its distance equal up to rounding in the last bits."""
+    cells: the same blocking cell, its distance equal up to rounding in the last bits. Its
+    steps between the jumps are ``first_hit``'s, written out again so that ``first_hit`` (the
+    simulator's and the localiser's casts) keeps a loop with no block lookups."""
     height = data.shape[0]
     width = data.shape[1]
     if not (0.0 <= gx0 < width and 0.0 <= gy0 < height):

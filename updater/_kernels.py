@@ -411,20 +411,11 @@ def walk_beams(ref, enclosed, clear, sensor, hits, reach, select, want, drop_las
         count = min(n_x + n_y + 1, cap) if n_x >= 0 else 0
         if count > 0 and drop_last and 0.0 <= tx < width and 0.0 <= ty < height:
             count -= 1
-        p = -1.0
-        if kind != WALK_FREE and clear.shape[0] > 0:
-            # the square of clear blocks around the sensor, with a margin inside it: the
-            # jump's closed-form sums may round either way
-            p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y,
-                               t_delta_x, t_delta_y), 1.0) - 1e-9
-        elif skip.shape[0] and skip[i] > 0.0 and count == n_x + n_y + 1:
-            p = min(skip[i] / math.hypot(tx - gx0, ty - gy0), 1.0 - 1e-9)
-        if p > t_max_x or p > t_max_y:
-            kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
-            kx, ky = min(kx, n_x), min(ky, n_y)
-            cx, cy, n_x, n_y, count = cx + kx * step_x, cy + ky * step_y, n_x - kx, n_y - ky, \
-                count - kx - ky
-            t_max_x, t_max_y = t_max_x + kx * t_delta_x, t_max_y + ky * t_delta_y
+        late = skip[i] if skip.shape[0] and count == n_x + n_y + 1 else 0.0
+        cx, cy, n_x, n_y, t_max_x, t_max_y, done = _walk_start(
+            clear, kind != WALK_FREE, late, gx0, gy0, tx, ty, cx, cy, n_x, n_y, step_x, step_y,
+            t_delta_x, t_delta_y, t_max_x, t_max_y)
+        count -= done
         n = _walk_cells(flat, enclosed, kind, cy * width + cx, n_x, n_y, count, step_x,
                         step_y * width, t_delta_x, t_delta_y, t_max_x, t_max_y, marks, out, n)
     return n
@@ -472,6 +463,39 @@ def free_walk_skips(sensor, hits, reach, select, want, increment, wrap, cap, out
                 break
             r = min(r, length - 1.5)
         out[i] = max(r, 0.0)
+
+
+@njit(cache=True, inline="always")
+def _walk_start(clear, jumps, late, gx0, gy0, tx, ty, cx, cy, n_x, n_y, step_x, step_y,
+                t_delta_x, t_delta_y, t_max_x, t_max_y):
+    """Where a walk from (gx0, gy0) to (tx, ty), at cell (cx, cy), begins flagging: past the
+    square of clear blocks around it (``jumps``, a walk that flags no free cell), or ``late``
+    grid units from the sensor (a free walk's ``free_walk_skips``, 0: none). Returns the walk's
+    state there and the cells passed over: (cx, cy, n_x, n_y, t_max_x, t_max_y, passed)."""
+    p = -1.0
+    if jumps and clear.shape[0] > 0:
+        # the square of clear blocks around the sensor, with a margin inside it: the jump's
+        # closed-form sums may round either way
+        p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
+                           t_delta_y), 1.0) - 1e-9
+    elif late > 0.0:
+        p = min(late / math.hypot(tx - gx0, ty - gy0), 1.0 - 1e-9)
+    if not (p > t_max_x or p > t_max_y):
+        return cx, cy, n_x, n_y, t_max_x, t_max_y, 0
+    kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
+    kx, ky = min(kx, n_x), min(ky, n_y)
+    return (cx + kx * step_x, cy + ky * step_y, n_x - kx, n_y - ky, t_max_x + kx * t_delta_x,
+            t_max_y + ky * t_delta_y, kx + ky)
+
+
+@njit(cache=True, inline="always")
+def _next_cell(idx, n_x, n_y, t_max_x, t_max_y, step_x, row_step, t_delta_x, t_delta_y):
+    """One step of a walk (``traverse``'s, on flat indices): the x edge first on a tie, and
+    only the steps left along each axis."""
+    go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
+    return (idx + (step_x if go_x else row_step), n_x - (1 if go_x else 0),
+            n_y - (0 if go_x else 1), t_max_x + t_delta_x if go_x else t_max_x,
+            t_max_y if go_x else t_max_y + t_delta_y)
 
 
 @njit(cache=True, inline="always")
@@ -904,20 +928,9 @@ def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, 
         if own > 0 and not f and 0.0 <= tx < width and 0.0 <= ty < height:
             own -= 1
         first, second = (own, 0) if a or f else (0, own)
-    p = -1.0
-    done = 0
-    if not f and clear.shape[0] > 0:
-        # the square of clear blocks around the sensor, with a margin inside it: the jump's
-        # closed-form sums may round either way
-        p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
-                           t_delta_y), 1.0) - 1e-9
-    elif skip > 0.0 and first == n_x + n_y + 1:
-        p = min(skip / math.hypot(tx - gx0, ty - gy0), 1.0 - 1e-9)
-    if p > t_max_x or p > t_max_y:
-        kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
-        kx, ky = min(kx, n_x), min(ky, n_y)
-        cx, cy, n_x, n_y, done = cx + kx * step_x, cy + ky * step_y, n_x - kx, n_y - ky, kx + ky
-        t_max_x, t_max_y = t_max_x + kx * t_delta_x, t_max_y + ky * t_delta_y
+    cx, cy, n_x, n_y, t_max_x, t_max_y, done = _walk_start(
+        clear, not f, skip if first == n_x + n_y + 1 else 0.0, gx0, gy0, tx, ty, cx, cy, n_x,
+        n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y)
     idx = cy * width + cx
     row_step = step_y * width
     both = min(first, second) if (a or f) and u else 0
@@ -969,12 +982,8 @@ def _walk_cells_on(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step,
         marks[b] = old | (bit if take else np.uint8(0))
         out[n] = idx
         n += take
-        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
-        idx += step_x if go_x else row_step
-        n_x -= 1 if go_x else 0
-        n_y -= 0 if go_x else 1
-        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
-        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+        idx, n_x, n_y, t_max_x, t_max_y = _next_cell(idx, n_x, n_y, t_max_x, t_max_y, step_x,
+                                                     row_step, t_delta_x, t_delta_y)
     return n, idx, n_x, n_y, t_max_x, t_max_y
 
 
@@ -997,12 +1006,8 @@ def _walk_free_and_unknown(flat, enclosed, idx, n_x, n_y, count, step_x, row_ste
             ch_marks[b] |= bit
             changed[n_ch] = idx
             n_ch += 1
-        go_x = n_x > 0 and (n_y == 0 or t_max_x <= t_max_y)
-        idx += step_x if go_x else row_step
-        n_x -= 1 if go_x else 0
-        n_y -= 0 if go_x else 1
-        t_max_x = t_max_x + t_delta_x if go_x else t_max_x
-        t_max_y = t_max_y if go_x else t_max_y + t_delta_y
+        idx, n_x, n_y, t_max_x, t_max_y = _next_cell(idx, n_x, n_y, t_max_x, t_max_y, step_x,
+                                                     row_step, t_delta_x, t_delta_y)
     return n_ch, n_un, idx, n_x, n_y, t_max_x, t_max_y
 
 

@@ -736,6 +736,42 @@ def test_push_flags_against_reference():
     assert not ch_marks[changed >> 3].any() and not un_marks[unchanged >> 3].any()
 
 
+@pytest.mark.parametrize("packed", [False, True])
+def test_push_flags_keeps_the_marks_of_the_settled_free_cells(packed):
+    """With ``full``, the unchanged-flag marks after a push are set on exactly the free cells
+    whose flags are all unchanged and (when counted) whose count reached T: those an unchanged
+    flag would not change. The buffers are as without it. (Which flags the walks then make:
+    ``test_updater_speedup``.)"""
+    rng = np.random.default_rng(8)
+    size, mask, threshold, shift = 600, 0x3FF, 7, 10 if packed else 0
+    data = np.where(rng.random(size) < 0.2, OCC, FREE).astype(np.int8)
+    hist = rng.integers(0, 4, size).astype(np.uint16)      # a few flags, mostly none
+    hist[rng.random(size) < 0.6] = 0
+    if packed:
+        hist |= (rng.integers(0, 12, size) << shift).astype(np.uint16)
+    full = threshold << shift if packed else 0
+    un_marks = np.zeros(75, np.uint8)
+    K.settled_marks(data, hist, mask, full, un_marks)
+    plain = hist.copy()
+    for scan in range(6):
+        changed = rng.choice(size, 30, replace=False).astype(np.int32)
+        unchanged = rng.choice(size, 200, replace=False).astype(np.int32)
+        args = (changed, unchanged, mask, threshold, 3 if packed else 0)
+        ch_marks = np.zeros(75, np.uint8)
+        ch_marks[changed >> 3] = 255
+        un_marks[unchanged >> 3] |= np.uint8(1) << (unchanged & 7).astype(np.uint8)
+        moved = np.zeros(230, np.int32)
+        seen = np.zeros(0, np.uint8)
+        K.push_flags(hist, seen, data, *args, ch_marks, un_marks, moved, shift, full)
+        K.push_flags(plain, seen, data, *args, np.zeros(75, np.uint8), np.zeros(75, np.uint8),
+                     moved.copy(), shift)
+        assert hist.tolist() == plain.tolist()
+        counts = (hist >> shift) if packed else np.full(size, threshold)
+        expect = (data == FREE) & ((hist & mask) == 0) & (counts >= threshold)
+        assert np.unpackbits(un_marks, bitorder="little")[:size].tolist() == expect.tolist()
+        assert 0 < expect.sum() < (data == FREE).sum()
+
+
 @pytest.mark.parametrize("support", [False, True, 2])
 @pytest.mark.parametrize("few", [0, 3])
 @pytest.mark.parametrize("packed", [False, True])

@@ -52,13 +52,15 @@ def session():
     return room_session(3.0, 5)
 
 
-def state_after_scans(config: UpdaterConfig, session) -> int:
+def state_after_scans(config: UpdaterConfig, session, workspace: bool = True) -> int:
+    """The updater's bytes after the session's scans (``workspace``: with the per-scan
+    workspace, whose lists grow with the flags of the busiest scan)."""
     ref, scans, _ = session
     updater = MapUpdater(embedded(ref, SIZE), config)
     for scan, noisy, true in scans:
         updater.process(scan, noisy, odometry=true)
     assert updater.stats["processed"] > 0
-    return updater.state_bytes()
+    return updater.state_bytes() - (0 if workspace else updater._ws.nbytes())
 
 
 def test_a_2000_map_with_the_unanimous_rule_stays_within_16_mb(session):
@@ -70,11 +72,13 @@ def test_a_2000_map_with_the_unanimous_rule_stays_within_16_mb(session):
 
 def test_the_flag_counts_take_no_bytes_with_the_robots_defaults(session):
     """With the growth into the unknown, its hit buffers (two bytes a cell) come on top: the
-    counts add nothing to them."""
+    counts add nothing to them. (The workspace aside: uncounted, a free cell's buffer is
+    settled sooner, so fewer flags are made and listed.)"""
     robot = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
     uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0,
                                  "spread_removed": False})
-    assert state_after_scans(robot, session) == state_after_scans(uncounted, session)
+    assert state_after_scans(robot, session, False) == \
+        state_after_scans(uncounted, session, False)
 
 
 def test_a_2000_map_with_the_update_defaults_stays_within_16_mb(session):
@@ -176,9 +180,13 @@ def test_no_count_field_where_the_buffer_leaves_too_few_bits():
 
 
 def same_run(a, b, scans) -> None:
+    """The same reports (``a``, this code, makes no unchanged flag where one would change
+    nothing: fewer of them, never more), the same output and evidence."""
     for scan, noisy, true in scans:
-        assert a.process(scan, noisy, odometry=true).summary() == \
-            b.process(scan, noisy, odometry=true).summary()
+        got = a.process(scan, noisy, odometry=true).summary()
+        want = b.process(scan, noisy, odometry=true).summary()
+        assert got.pop("unchanged_flags") <= want.pop("unchanged_flags")
+        assert got == want
     assert np.array_equal(a.updated_map().data, b.updated_map().data)
     assert a.evidence_summary() == b.evidence_summary()
     assert np.array_equal(a.change_counts(), b.change_counts())

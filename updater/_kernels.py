@@ -51,6 +51,13 @@ def test_and_set(bits, idx):
     return True
 
 
+@njit(cache=True, inline="always")
+def set_bit(bits, idx, value):
+    """Set cell ``idx``'s bit to ``value``."""
+    b = idx >> 3
+    bits[b] = (bits[b] & ~np.uint8(1 << (idx & 7))) | np.uint8(np.int64(value) << (idx & 7))
+
+
 @njit(cache=True)
 def clear_bits(bits, cells, n):
     """Clear the bits of the first ``n`` listed cells, and only those."""
@@ -375,6 +382,8 @@ WALK_OPEN_UNKNOWN = 2
 # walk_beams without its shortcuts: the plain walks the fused ones are checked against
 NO_BLOCKS = np.zeros((0, 0), np.uint8)
 NO_SKIPS = np.zeros(0, np.float64)
+# ``settled``'s bound past every buffer: none is settled
+NEVER_SETTLED = 0x10000
 
 
 @njit(cache=True)
@@ -385,8 +394,10 @@ def walk_beams(ref, enclosed, clear, sensor, hits, reach, select, want, drop_las
     position n) the cells of its walk (at most ``cap`` of them, as ``walk`` lists at most that
     many) that are of ``kind`` and not yet marked, in the walks' order, and mark them. Returns
     the new count. The cells are those of ``traverse``: the same start, the same steps, the
-    same tie-breaking. The flag goes in without a branch (``out[n]`` is written for every
-    cell and kept only when the cell is taken, so ``out`` needs one slot to spare), and the
+    same tie-breaking. The flag of a walk through M's obstacles or unknown space goes in
+    without a branch (``out[n]`` is written for every cell and kept only when the cell is
+    taken, so ``out`` needs one slot to spare); a free walk's behind a branch, as most of its
+    cells are marked already when ``marks`` keeps the settled ones (``settled_marks``); and the
     loop over the beams holds the loop over the cells: no call per beam takes an array, each
     of which would cost reference counting.
 
@@ -550,6 +561,29 @@ def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
     return n
 
 
+@njit(cache=True)
+def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks):
+    """Clear the unchanged-flag marks (``un_marks``, set between scans on the free cells whose
+    buffers are settled: ``settled_marks``) of the free cells that take a changed flag this
+    scan, before the walks: the new-obstacle flags (``flag_new_obstacles``, with the seen
+    surfaces' marks in ``ch_marks``) and the ``fill_gaps`` flags (``gaps`` > 0: the clearance
+    of ``flag_gaps``, which flags each such cell that is not a new obstacle). Those flags come
+    after the walks, and after a changed flag an unchanged one counts."""
+    width = ref.shape[1]
+    for i in range(hits.shape[0]):
+        if verdict[i] == CHANGE:
+            if not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
+                continue
+        elif verdict[i] != UNCHANGED or gaps == 0 or \
+                not square_is_free(ref, hits[i, 0], hits[i, 1], gaps):
+            continue
+        if not (0.0 <= hits[i, 0] < width and 0.0 <= hits[i, 1] < ref.shape[0]):
+            continue
+        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
+        if verdict[i] == UNCHANGED or not bit_get(ch_marks, idx):
+            set_bit(un_marks, idx, False)
+
+
 # --- seen-surface guard (not in the paper) ----------------------------------------------------
 @njit(cache=True)
 def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, marks, out):
@@ -592,27 +626,32 @@ def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
     """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
     whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has
     nothing that near); each cell once (``marks``). Returns the new count."""
-    height, width = ref.shape
-    k = clearance
+    width = ref.shape[1]
     for i in range(hits.shape[0]):
-        if verdict[i] != UNCHANGED:
+        if verdict[i] != UNCHANGED or not square_is_free(ref, hits[i, 0], hits[i, 1],
+                                                         clearance):
             continue
-        row0 = int(np.floor(hits[i, 1]))
-        col0 = int(np.floor(hits[i, 0]))
-        if row0 < k or row0 >= height - k or col0 < k or col0 >= width - k:
-            continue
-        free = True
-        for dr in range(-k, k + 1):
-            for dc in range(-k, k + 1):
-                if ref[row0 + dr, col0 + dc] != FREE:
-                    free = False
-                    break
-            if not free:
-                break
-        if free and test_and_set(marks, row0 * width + col0):
-            out[n] = row0 * width + col0
+        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
+        if test_and_set(marks, idx):
+            out[n] = idx
             n += 1
     return n
+
+
+@njit(cache=True)
+def square_is_free(ref, px, py, k):
+    """True when the square of k cells each way around the cell of (px, py) lies on the map and
+    is all free in ``ref``."""
+    height, width = ref.shape
+    row0 = int(np.floor(py))
+    col0 = int(np.floor(px))
+    if row0 < k or row0 >= height - k or col0 < k or col0 >= width - k:
+        return False
+    for dr in range(-k, k + 1):
+        for dc in range(-k, k + 1):
+            if ref[row0 + dr, col0 + dc] != FREE:
+                return False
+    return True
 
 
 # --- 3. unchanged-cells evaluator -------------------------------------------------------------
@@ -978,10 +1017,18 @@ def _walk_cells_on(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step,
         else:
             wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
         old = marks[b]
-        take = wanted & ((old & bit) == 0)
-        marks[b] = old | (bit if take else np.uint8(0))
-        out[n] = idx
-        n += take
+        if kind == WALK_FREE:
+            # most free cells are marked already (settled_marks): a branch that is rarely
+            # taken costs less than a store at every cell
+            if wanted and (old & bit) == 0:
+                marks[b] = old | bit
+                out[n] = idx
+                n += 1
+        else:
+            take = wanted & ((old & bit) == 0)
+            marks[b] = old | (bit if take else np.uint8(0))
+            out[n] = idx
+            n += take
         idx, n_x, n_y, t_max_x, t_max_y = _next_cell(idx, n_x, n_y, t_max_x, t_max_y, step_x,
                                                      row_step, t_delta_x, t_delta_y)
     return n, idx, n_x, n_y, t_max_x, t_max_y
@@ -1046,6 +1093,7 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
             if margin > 0.0 and margin < ranges[i]:
                 free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
     free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
+    unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks)
     n, n_un = walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
                         verdict, free_reach, skips, into, unknown_reach, cap, ch_marks,
                         un_marks, changed, 0, unchanged, 0)
@@ -1067,11 +1115,11 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
 
 @njit(cache=True)
 def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
-                    support, width, ch_marks, un_marks, moved, shift=0):
+                    support, width, ch_marks, un_marks, moved, shift=0, full=NEVER_SETTLED):
     """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
     stamps), in one call. Returns the change of the number of changed cells."""
     n_moved = push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks,
-                         un_marks, moved, shift)
+                         un_marks, moved, shift, full)
     return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
                   support, ch_marks, shift)
 
@@ -1079,7 +1127,7 @@ def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshol
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
-               out_moved, shift=0):
+               out_moved, shift=0, full=NEVER_SETTLED):
     """Shift the scan's flags into the buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & mask`` in the buffer's low bits, count each flag
     (``flag_count``: in ``seen``, or with ``shift`` > 0 above the flags; an empty ``seen``
@@ -1087,9 +1135,13 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
     clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
     rule for few observations, ``few`` > 0, whose observations are still below the threshold),
     as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
-    changed too). Returns the count written."""
+    changed too). With ``full`` (``settled``'s bound), the unchanged-flag marks are kept
+    between scans on the free cells whose buffers are settled, and only on those
+    (``settled_marks``): a free walk makes no flag that would change nothing. Returns the
+    count written."""
     n = 0
     n_changed = changed.shape[0]
+    keep = full != NEVER_SETTLED
     # the count's lowest bit in the buffer (0: the array of its own); written out in the loop,
     # as a call it kept the loop several times slower
     unit = np.int64(1) << shift if shift > 0 else 0
@@ -1100,20 +1152,28 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
             ch_marks[idx >> 3] = 0
         else:
             idx, flag = unchanged[k - n_changed], 0
-            un_marks[idx >> 3] = 0
-        old = np.int64(hist[idx]) & mask
+            if not keep:
+                un_marks[idx >> 3] = 0
+        h = np.int64(hist[idx])
+        old = h & mask
+        free = ref[idx] == FREE
         watched = few > 0 and ref[idx] == OCCUPIED
         was = watched and confirmed(hist, seen, ref, idx, mask, shift)
         if unit > 0:
-            counted = np.int64(hist[idx]) + unit
-            if counted <= 0xFFFF:       # past it, the count (the top field) would wrap
-                hist[idx] = np.uint16(counted)
+            if h + unit <= 0xFFFF:      # past it, the count (the top field) would wrap
+                h += unit
+                hist[idx] = np.uint16(h)
         elif counting and seen[idx] < 255:
             seen[idx] += 1
         if old == 0 and flag == 0 and not watched:
+            if keep:
+                set_bit(un_marks, idx, free and h >= full)
             continue            # an unchanged flag into an all-unchanged buffer: no change
         new = ((old << 1) | flag) & mask
-        hist[idx] = np.uint16((np.int64(hist[idx]) & ~mask) | new)
+        h = (h & ~mask) | new
+        hist[idx] = np.uint16(h)
+        if keep:
+            set_bit(un_marks, idx, free and settled(h, mask, full))
         p_old, p_new = popcount16(old), popcount16(new)
         crossed = (p_old >= threshold) != (p_new >= threshold)
         if watched and was != confirmed(hist, seen, ref, idx, mask, shift):
@@ -1125,6 +1185,27 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
             out_moved[n] = idx
             n += 1
     return n
+
+
+@njit(cache=True, inline="always")
+def settled(h, mask, full):
+    """Whether an unchanged flag would change nothing in a buffer ``h``: all its flags
+    (``mask``) are unchanged, and its flag count is past every bound a rule reads it against
+    (``h`` >= ``full``: that bound shifted to where the count starts; 0 when no count is
+    kept). ``push_flags`` passes over such a flag."""
+    return (h & mask) == 0 and h >= full
+
+
+@njit(cache=True)
+def settled_marks(ref, hist, mask, full, out):
+    """The unchanged-flag marks between scans (``push_flags`` with ``full``): the bits of the
+    free cells of M (``ref``, flat) whose buffers are ``settled``."""
+    out[:] = 0
+    if full == NEVER_SETTLED:
+        return
+    for i in range(ref.shape[0]):
+        if ref[i] == FREE and settled(np.int64(hist[i]), mask, full):
+            out[i >> 3] |= np.uint8(1 << (i & 7))
 
 
 @njit(cache=True, inline="always")

@@ -7,11 +7,13 @@ array              bytes per cell  what
 =================  ==============  ==========================================================
 reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
 buffers            2               uint16 shift registers of the last N_b flags
-flag counts        0 or 1          flags a cell ever got (saturating): above the flags in the
-                                   buffer (N_b <= 12), else a uint8 (at 255)
+flag counts        0 or 1          flags a cell got (saturating; a settled free cell's stays
+                                   at T or past it): above the flags in the buffer (N_b <= 12),
+                                   else a uint8 (at 255)
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
-scan marks         2/8             bits per cell, set and cleared within one scan
+scan marks         2/8             bits per cell, set and cleared within one scan (the
+                                   unchanged-flag marks stay set on settled free cells)
 hit buffers        2 where used    uint16 shift registers of hits in open unknown space, in
                                    tiles of 64 x 64 cells made where a scan first hits it
 drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
@@ -83,7 +85,9 @@ class ScanReport:
     raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
     changed_flags: int = 0         # cells that got a changed flag
     new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
-    unchanged_flags: int = 0       # cells that got an unchanged flag
+    # cells that got an unchanged flag, but for the free cells where one would change nothing
+    # (docs/algorithm.md, "Unchanged flags that would change nothing")
+    unchanged_flags: int = 0
     changed_cells: int = 0         # cells whose state differs from M, after this scan
     verdicts: np.ndarray | None = None   # a BeamVerdict per beam (int8), None when not classified
     # the sensor pose the scan was placed at: as given, or as the pose check refined it; None
@@ -142,7 +146,8 @@ class MapUpdater:
         n_bytes = (self._ref.size + 7) // 8
         self._decided = np.zeros(n_bytes, np.uint8)
         self._ch_marks = np.zeros(n_bytes, np.uint8)
-        self._un_marks = np.zeros(n_bytes, np.uint8)
+        # set between scans on the free cells where an unchanged flag would change nothing
+        self._un_marks = steps.settled_marks(self._ref, self._hist, config)
         self._enclosed = np.zeros(n_bytes, np.uint8)
         # growth into the unknown: hit buffers of open unknown cells, their drawn bits, marks
         self._hits = HitTiles(self._ref.shape, config.grow_into_unknown)
@@ -425,6 +430,7 @@ class MapUpdater:
             self._hits = HitTiles.from_dense(hits)
         if not packed:
             self._restore_counts(path, hist, seen)
+        self._un_marks = steps.settled_marks(self._ref, self._hist, self.config)
         ref = self._ref.reshape(-1)
         self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
                                                           self._seen.reshape(-1), ref,

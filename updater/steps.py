@@ -523,6 +523,28 @@ def count_shift(cfg: UpdaterConfig) -> int:
     return cfg.buffer_size
 
 
+def settled_bound(cfg: UpdaterConfig) -> int:
+    """``settled``'s bound: from which buffer on an unchanged flag into a free cell's buffer of
+    unchanged flags changes nothing. 0 when no count is kept; else the count T, shifted to its
+    bits: the rules read a free cell's count only against T (``decide``: observed fewer than T
+    times; the others read the counts of occupied cells); none (``NEVER_SETTLED``) when the
+    count has an array of its own."""
+    if not cfg.unanimous_min:
+        return 0
+    shift = count_shift(cfg)
+    full = cfg.threshold << shift
+    return full if shift and full <= 0xFFFF else kernels().NEVER_SETTLED
+
+
+def settled_marks(ref: np.ndarray, hist: np.ndarray, cfg: UpdaterConfig) -> np.ndarray:
+    """The unchanged-flag marks between scans: a bit per cell, set on the free cells of M whose
+    buffers are settled (an unchanged flag would change nothing there, so no walk makes one)."""
+    out = np.zeros((ref.size + 7) // 8, np.uint8)
+    kernels().settled_marks(ref.reshape(-1), hist.reshape(-1), mask=buffer_mask(cfg),
+                            full=settled_bound(cfg), out=out)
+    return out
+
+
 def support_mode(cfg: UpdaterConfig) -> int:
     """The neighbour support the decision kernels apply: 0 none, 1 the paper's two states
     (free / occupied-or-unknown), 2 the same value of M (``support_exact_state``)."""
@@ -566,14 +588,15 @@ def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.n
                     cfg: UpdaterConfig, ch_marks: np.ndarray, un_marks: np.ndarray,
                     ws: Workspace) -> int:
     """``push_flags`` then ``decide`` in one kernel call (the changed-flag marks, all clear
-    after the push, serve the decision as its stamps). Returns the change of the number of
-    changed cells."""
+    after the push, serve the decision as its stamps). The unchanged-flag marks stay set on
+    the free cells whose buffers are settled (``settled_marks``). Returns the change of the
+    number of changed cells."""
     ws.for_moved(n_changed + n_unchanged)
     return int(kernels().push_and_decide(
         hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
         unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg), threshold=cfg.threshold,
         few=cfg.unanimous_min, support=support_mode(cfg), width=width, ch_marks=ch_marks,
-        un_marks=un_marks, moved=ws.moved, shift=count_shift(cfg)))
+        un_marks=un_marks, moved=ws.moved, shift=count_shift(cfg), full=settled_bound(cfg)))
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,

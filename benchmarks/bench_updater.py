@@ -172,8 +172,8 @@ def time_parts(ref: OccupancyGrid, scans) -> dict:
 def time_inner(ref: OccupancyGrid, scans) -> dict:
     """Mean time per scan [ms] of the heaviest work inside ``classify_scan`` and
     ``flag_scan``, run again alone on each scan's recorded inputs, best of three passes: the
-    virtual beams' cast and the walks (scratch marks, so each flags what it flagged in the
-    scan)."""
+    virtual beams' cast and the walks (each from the marks it met in the scan: the free walks
+    from the unchanged-flag marks of the settled free cells, the others from none)."""
     from updater import steps
 
     kernels = steps.kernels()
@@ -221,7 +221,7 @@ def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
                  kernels.WALK_FREE),
                 ("removed-obstacle walks (walk_beams)", "removed_reach", kernels.CHANGE, True,
                  kernels.WALK_BLOCKED)):
-            marks[:] = 0
+            marks[:] = kw["un_marks"] if kind == kernels.WALK_FREE else 0
             t0 = CLOCK()
             if kind == kernels.WALK_FREE:
                 kernels.free_walk_skips(kw["sensor"], kw["hits"], kw[reach], kw["verdict"],

@@ -1007,24 +1007,22 @@ def _walk_cells_on(flat, enclosed, kind, idx, n_x, n_y, count, step_x, row_step,
     """``_walk_cells``, returning where the walk stands after it: (n, idx, n_x, n_y, t_max_x,
     t_max_y)."""
     for _ in range(count):
-        v = flat[idx]
         b = idx >> 3
         bit = np.uint8(1 << (idx & 7))
-        if kind == WALK_FREE:
-            wanted = v == FREE
-        elif kind == WALK_BLOCKED:
-            wanted = v != FREE
-        else:
-            wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
         old = marks[b]
         if kind == WALK_FREE:
             # most free cells are marked already (settled_marks): a branch that is rarely
-            # taken costs less than a store at every cell
-            if wanted and (old & bit) == 0:
+            # taken costs less than a store at every cell, and M is read only past it
+            if (old & bit) == 0 and flat[idx] == FREE:
                 marks[b] = old | bit
                 out[n] = idx
                 n += 1
         else:
+            v = flat[idx]
+            if kind == WALK_BLOCKED:
+                wanted = v != FREE
+            else:
+                wanted = v != FREE and v != OCCUPIED and (enclosed[b] & bit) == 0
             take = wanted & ((old & bit) == 0)
             marks[b] = old | (bit if take else np.uint8(0))
             out[n] = idx

@@ -551,6 +551,19 @@ def test_new_obstacle_flag_flips_exactly_at_the_new_obstacle_radius(r):
         assert (cells, n_new) == (([hit_cell], 1) if flagged else ([], 0)), (r, factor)
 
 
+def test_a_new_obstacle_radius_of_0_flags_no_hit_off_the_map():
+    """With tol 0 no cell meets the disc around the hit, the map's outside neither: a hit off
+    the map is no cell to flag, and its mark would lie outside the bit plane."""
+    data = np.zeros((16, 16), np.int8)
+    hits = np.array([[20.5, 3.5], [3.5, -0.5], [5.5, 5.5]])
+    marks = np.zeros(33, np.uint8)          # one byte more than the map's 32
+    out = np.zeros(4, np.int32)
+    verdict = np.full(3, K.CHANGE, np.int8)
+    n = K.flag_new_obstacles(data, hits, np.zeros(3), verdict, marks, out, 0)
+    assert out[:n].tolist() == [5 * 16 + 5]
+    assert marks[32] == 0 and np.count_nonzero(np.unpackbits(marks)) == 1
+
+
 @pytest.mark.parametrize("r", [1.0, 5.0, 10.0, 15.0])
 def test_removed_obstacle_walk_ends_exactly_at_p_th(r):
     data = np.zeros((10, 340), np.int8)

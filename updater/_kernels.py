@@ -554,6 +554,8 @@ def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
     for i in range(hits.shape[0]):
         if verdict[i] != CHANGE or not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
             continue
+        if not (0.0 <= hits[i, 0] < width and 0.0 <= hits[i, 1] < ref.shape[0]):
+            continue        # tol 0: no cell meets the disc, the map's outside neither
         idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
         if test_and_set(marks, idx):
             out[n] = idx

@@ -4,11 +4,11 @@ Nav2's map_server and amcl are, so that Nav2's lifecycle manager brings it up an
 - configure: the parameters (validated as the YAML configs are; a misspelt name fails the
   transition with the nearest valid one) and the reference map (``--map``, or the
   transient-local ``map`` topic as Nav2's map_server publishes it); the services.
-- activate: the subscriptions (scans with the sensor-data QoS lidars publish with, and the
-  poses) and the publications (``map_updated``, transient local, each ``publish_period``
-  when it changed; ``map_updated_updates``, the box of cells changed since the last
-  publication, as the costmap's static layer reads with ``subscribe_to_updates``;
-  ``/diagnostics``).
+- activate: the subscriptions (scans best effort, as lidars publish, with a history of
+  ``queue_size``; the poses) and the publications (``map_updated``, transient local, each
+  ``publish_period`` when it changed; ``map_updated_updates``, the box of cells changed
+  since the last publication, as the costmap's static layer reads with
+  ``subscribe_to_updates``; ``/diagnostics``).
 - deactivate, cleanup: stop those, then drop the map and the buffers.
 
 Poses (``pose_source``): "tf", each scan's ``map -> odom -> base_frame -> laser`` from /tf
@@ -60,8 +60,7 @@ try:
     from nav_msgs.msg import Odometry
     from rclpy.executors import ExternalShutdownException
     from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
-    from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy,
-                           qos_profile_sensor_data)
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import LaserScan
     from std_srvs.srv import Trigger
 except ImportError as e:  # a robot without the ROS 2 wheels: said in one line by the command
@@ -159,8 +158,12 @@ class MapUpdaterNode(LifecycleNode):
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         s = self.settings
-        subs = [self.create_subscription(LaserScan, topic, self._scan_handler(topic),
-                                         qos_profile_sensor_data)
+        # best effort, as lidar drivers publish; the history as long as the node's own queue,
+        # so that a busy moment drops scans there, counted, and not unseen in the middleware
+        scan_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=s.queue_size,
+                              reliability=ReliabilityPolicy.BEST_EFFORT,
+                              durability=DurabilityPolicy.VOLATILE)
+        subs = [self.create_subscription(LaserScan, topic, self._scan_handler(topic), scan_qos)
                 for topic in dict.fromkeys(s.scan_topics)]
         if s.pose_source == "tf":
             subs.append(self.create_subscription(TFMessage, "/tf",

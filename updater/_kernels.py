@@ -550,14 +550,11 @@ def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
     """New obstacles: the hit cell of each CHANGE beam i, if every cell of ``ref`` within
     ``tol[i]`` (tol(r_i), grid units) of the hit is free, appended to ``out`` from position n;
     each cell once (``marks``). Returns the new count."""
-    width = ref.shape[1]
     for i in range(hits.shape[0]):
         if verdict[i] != CHANGE or not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
             continue
-        if not (0.0 <= hits[i, 0] < width and 0.0 <= hits[i, 1] < ref.shape[0]):
-            continue        # tol 0: no cell meets the disc, the map's outside neither
-        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
-        if test_and_set(marks, idx):
+        idx = hit_cell(ref, hits[i, 0], hits[i, 1])
+        if idx >= 0 and test_and_set(marks, idx):     # off the map only with tol 0
             out[n] = idx
             n += 1
     return n
@@ -571,7 +568,6 @@ def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks):
     surfaces' marks in ``ch_marks``) and the ``fill_gaps`` flags (``gaps`` > 0: the clearance
     of ``flag_gaps``, which flags each such cell that is not a new obstacle). Those flags come
     after the walks, and after a changed flag an unchanged one counts."""
-    width = ref.shape[1]
     for i in range(hits.shape[0]):
         if verdict[i] == CHANGE:
             if not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
@@ -579,10 +575,8 @@ def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks):
         elif verdict[i] != UNCHANGED or gaps == 0 or \
                 not square_is_free(ref, hits[i, 0], hits[i, 1], gaps):
             continue
-        if not (0.0 <= hits[i, 0] < width and 0.0 <= hits[i, 1] < ref.shape[0]):
-            continue
-        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
-        if verdict[i] == UNCHANGED or not bit_get(ch_marks, idx):
+        idx = hit_cell(ref, hits[i, 0], hits[i, 1])
+        if idx >= 0 and (verdict[i] == UNCHANGED or not bit_get(ch_marks, idx)):
             set_bit(un_marks, idx, False)
 
 
@@ -628,16 +622,24 @@ def flag_gaps(ref, hits, verdict, clearance, marks, out, n):
     """Changed flags, appended to ``out`` from position n, for the hit cells of UNCHANGED beams
     whose square of ``clearance`` cells each way is free in ``ref`` (a surface where M has
     nothing that near); each cell once (``marks``). Returns the new count."""
-    width = ref.shape[1]
     for i in range(hits.shape[0]):
         if verdict[i] != UNCHANGED or not square_is_free(ref, hits[i, 0], hits[i, 1],
                                                          clearance):
             continue
-        idx = int(np.floor(hits[i, 1])) * width + int(np.floor(hits[i, 0]))
+        idx = hit_cell(ref, hits[i, 0], hits[i, 1])
         if test_and_set(marks, idx):
             out[n] = idx
             n += 1
     return n
+
+
+@njit(cache=True, inline="always")
+def hit_cell(ref, px, py):
+    """The flat index of the cell of point (px, py), -1 when it lies off the map."""
+    height, width = ref.shape
+    if not (0.0 <= px < width and 0.0 <= py < height):
+        return -1
+    return int(np.floor(py)) * width + int(np.floor(px))
 
 
 @njit(cache=True)
@@ -901,7 +903,6 @@ def apply_drawn(drawn, out):
 # further end flags for both: the removed-obstacle walk's kind (occupied or unknown) holds the
 # open unknown; an agreeing beam's cells are free (an unchanged flag) or open unknown (a changed
 # one), never both.
-WALK_FREE_AND_UNKNOWN = 3
 
 
 @njit(cache=True, inline="always")

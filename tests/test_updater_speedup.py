@@ -280,6 +280,74 @@ def test_free_walks_that_skip_their_start_flag_the_cells_of_walks_from_the_senso
     assert flagged[0] == flagged[1] and len(flagged[0]) > 2000
 
 
+def runs_of_beams(rng, n, runs, longest):
+    """A few runs of consecutive beams (wrapping past the last), as a bool per beam."""
+    out = np.zeros(n, bool)
+    for start in rng.integers(0, n, runs):
+        out[(start + np.arange(rng.integers(1, longest + 1))) % n] = True
+    return out
+
+
+def guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_reach, radius,
+                       need):
+    """The changed flags of ``walk_scan`` after the seen-surface guard around the hits of the
+    beams ``need`` selects (None: every valid beam)."""
+    marks = np.zeros_like(bits)
+    K.mark_seen_surfaces(data, bits, hits, verdict, radius, min(radius, 1.0), marks,
+                         np.zeros(data.size, np.int32), need)
+    changed, unchanged = np.zeros(data.size + 1, np.int32), np.zeros(data.size + 1, np.int32)
+    n_ch, _ = K.walk_scan(data, bits, steps.clear_blocks(data), sensor, hits, verdict, reach,
+                          verdict, np.full(len(hits), 0.98), np.zeros(len(hits)), into,
+                          unknown_reach, 1000, marks, np.zeros_like(bits), changed, 0,
+                          unchanged, 0)
+    return changed[:n_ch].tolist()
+
+
+@pytest.mark.parametrize("seed, n, fov, radius", [
+    (0, 720, 2 * math.pi, 1.5), (1, 360, 2 * math.pi * 359 / 360, 1.5), (2, 181, math.pi, 3.0),
+    (3, 400, 2.3 * math.pi, 1.5), (4, 90, 1.9 * math.pi, 2.0), (5, 1081, 1.5 * math.pi, 1.5)])
+def test_the_guard_around_the_hits_near_a_changed_walk_flags_as_the_whole_guard(seed, n, fov,
+                                                                                 radius):
+    """The seen-surface guard only around the hits ``guard_needed`` keeps (those near a walk
+    that flags changed cells) leaves the walks the very flags of the guard around every hit,
+    on cluttered maps where the walks cross many guarded cells; scans of a turn, nearly a
+    turn, half a turn and more than a turn. The guard bites (it takes flags away), the
+    pruning too (it leaves hits out), and guarding only the hits of a walking beam and its
+    neighbours (rho 0) would change the flags."""
+    rng = np.random.default_rng(70 + seed)
+    data, enclosed = random_map(rng, 90, 110)
+    bits = np.packbits(enclosed.reshape(-1), bitorder="little")
+    height, width = data.shape
+    sensor = np.array([rng.uniform(0.3, 0.7) * width, rng.uniform(0.3, 0.7) * height, 0.0])
+    a = rng.uniform(-math.pi, math.pi) + fov / n * np.arange(n)
+    r = np.where(rng.random(n) < 0.1, rng.uniform(0.2, 4.0, n), rng.uniform(4.0, 70.0, n))
+    hits = np.c_[sensor[0] + r * np.cos(a), sensor[1] + r * np.sin(a)]
+    verdict = np.where(runs_of_beams(rng, n, 4, n // 20), K.CHANGE, K.UNCHANGED)
+    verdict = verdict.astype(np.int8)
+    verdict[rng.random(n) < 0.05] = K.INVALID
+    hits[verdict == K.INVALID] = np.nan
+    reach = rng.uniform(-0.1, 1.0, n)
+    into = runs_of_beams(rng, n, 3, n // 30) & (verdict != K.INVALID)
+    unknown_reach = rng.uniform(-0.1, 1.0, n)
+    need = np.zeros(n, bool)
+    count = K.guard_needed(sensor, hits, verdict, verdict, reach, into, unknown_reach, radius,
+                           fov / n, need)
+    assert count == need.sum() and 0 < count < 0.8 * np.count_nonzero(verdict != K.INVALID)
+    assert not need[verdict == K.INVALID].any()
+    every = guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_reach,
+                               radius, None)
+    assert guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_reach,
+                              radius, need) == every
+    unguarded = guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into,
+                                   unknown_reach, 0.0, np.zeros(n, bool))
+    assert len(unguarded) > len(every) > 20
+    narrow = np.zeros(n, bool)      # rho = 1e-6: the walking beams and their neighbours
+    K.guard_needed(sensor, hits, verdict, verdict, reach, into, unknown_reach,
+                   -math.sqrt(2.0), fov / n, narrow)
+    assert guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_reach,
+                              radius, narrow) != every
+
+
 def test_a_walk_stops_at_the_cap_as_the_listed_walk_does():
     data = np.zeros((20, 200), np.int8)
     sensor, hits = np.array([1.5, 10.5, 0.0]), np.array([[190.5, 10.5]])

@@ -582,19 +582,21 @@ def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks):
 
 # --- seen-surface guard (not in the paper) ----------------------------------------------------
 @njit(cache=True)
-def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, marks, out):
+def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, marks, out,
+                       need=None):
     """Mark (in ``marks``, so the removed-obstacle walk passes them by) the cells of ``ref``
     that come within ``radius`` (grid units) of the hit point of any valid beam and are
     occupied, or within ``unknown_radius`` and unknown outside the ``enclosed`` regions, and
     list them in ``out``. Enclosed unknown cells (an object's interior) are left to the walk: a
     hit near one is on the face of whatever still stands beside it, and the last check closes
-    what stays unknown next to a freed cell. Returns the count listed."""
+    what stays unknown next to a freed cell. ``need``: only the hits of the beams it selects
+    (``guard_needed``). Returns the count listed."""
     height, width = ref.shape
     n = 0
     r2 = radius * radius
     u2 = unknown_radius * unknown_radius
     for i in range(hits.shape[0]):
-        if verdict[i] == INVALID:
+        if verdict[i] == INVALID or (need is not None and not need[i]):
             continue
         x, y = hits[i, 0], hits[i, 1]
         for row in range(max(int(np.floor(y - radius)), 0),
@@ -614,6 +616,63 @@ def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, mar
                     out[n] = idx
                     n += 1
     return n
+
+
+@njit(cache=True)
+def guard_needed(sensor, hits, verdict, removed_select, removed_reach, into, unknown_reach,
+                 radius, increment, out):
+    """Which valid beams' hits the seen-surface guard needs (``out``), as ``walk_scan`` walks:
+    those near a walk that flags changed cells (a removed-obstacle walk, ``removed_select``
+    CHANGE with ``removed_reach`` > 0, or a walk into unknown space, ``into`` with
+    ``unknown_reach`` > 0). The guard's marks matter to those walks alone. A cell that beam
+    i's walk crosses has its centre within sqrt(2) / 2 of i's ray, and a guarded cell has it
+    within ``radius`` + sqrt(2) / 2 of the hit; so the hit of beam j, R from the sensor, can
+    guard a cell of i's walk only if i's ray passes within rho = ``radius`` + sqrt(2) of it:
+    R <= rho, or R sin(a) <= rho for the angle a <= pi / 2 between the two beams. Beam j
+    lies at j ``increment`` from beam 0, modulo a turn (the scan may cover a turn or more);
+    the angle is taken to the nearest such walk, less one beam in hand. ``increment`` 0:
+    every valid beam's hit. Returns the count."""
+    n = hits.shape[0]
+    before = np.empty(n, np.int64)      # the last beam at or before i whose walk flags changed
+    after = np.empty(n, np.int64)       # ... the first at or after i; -1: none
+    last = -1
+    for i in range(n):
+        if (removed_select[i] == CHANGE and removed_reach[i] > 0.0) or \
+                (into[i] and unknown_reach[i] > 0.0):
+            last = i
+        before[i] = last
+    last = -1
+    for i in range(n - 1, -1, -1):
+        last = i if before[i] == i else last
+        after[i] = last
+    rho2 = (radius + math.sqrt(2.0) + 1e-6) ** 2
+    turn = 2.0 * math.pi / increment if increment > 0.0 else 0.0    # beams per turn
+    # the nearest walk lies within half a turn of j + m turn: |m| <= (n - 1) / turn + 1 / 2
+    turns = int((n - 1) / turn + 0.5) if 0.0 < turn < 2.0 * n else 0
+    count = 0
+    for j in range(n):
+        need = False
+        if verdict[j] != INVALID and n > 0 and before[n - 1] >= 0:
+            dx, dy = hits[j, 0] - sensor[0], hits[j, 1] - sensor[1]
+            r2 = dx * dx + dy * dy
+            need = not increment > 0.0 or r2 <= rho2
+            gap = np.inf                # [beams] to the nearest walk, turns apart counted
+            for t in range(2 * turns + 1):      # m = 0, 1, -1, 2, -2 ...
+                p = j + ((t + 1) // 2) * (1 - 2 * (t % 2 == 0)) * turn
+                if max(-p, p - (n - 1)) >= gap:
+                    continue
+                lo, hi = min(int(math.floor(p)), n - 1), max(int(math.ceil(p)), 0)
+                if lo >= 0 and before[lo] >= 0:
+                    gap = min(gap, p - before[lo])
+                if hi <= n - 1 and after[hi] >= 0:
+                    gap = min(gap, after[hi] - p)
+            a = max(gap - 1.0, 0.0) * increment
+            # sin(a) >= 2 a / pi: most beams are told apart without a sine
+            if not need and a <= 0.5 * math.pi and r2 * (a / (0.5 * math.pi)) ** 2 <= rho2:
+                need = r2 * math.sin(a) ** 2 <= rho2
+        out[j] = need
+        count += need
+    return count
 
 
 # --- fill_gaps (not in the paper) -------------------------------------------------------------
@@ -1065,10 +1124,11 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
               removed_reach, tol, free_reach, expected, directions, found, guard,
               unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap, skips,
               ch_marks, un_marks, hit_marks, protected, hits_unknown, into, unknown_reach,
-              changed, unchanged):
+              need, changed, unchanged):
     """The flags of a scan past the lost check, as ``MapUpdater``'s steps (``updater.steps``)
-    give them one after the other: the seen-surface guard (radius ``guard``, 0: none), the
-    unknown cells hit (``grow``), the removed-obstacle walks, the new-obstacle flags, the walks
+    give them one after the other: the seen-surface guard (radius ``guard``, 0: none; around
+    the hits that ``guard_needed`` finds near a walk the guard changes, into the scratch
+    ``need``), the unknown cells hit (``grow``), the removed-obstacle walks, the new-obstacle flags, the walks
     into unknown space, the guard released, ``fill_gaps`` (clearance ``gaps``, 0: off; the
     free walks then reach to ``margin`` short of the hit where that is further), the free
     walks, the unchanged flags of occupied cells, the hits that confirm M's surfaces
@@ -1079,16 +1139,18 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
     ``clear`` (``clear_blocks`` of ``ref``) and the free walks' ``free_walk_skips``
     (``increment``, ``wrap``), written to the scratch ``skips``. Returns (changed flags,
     new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells hit)."""
-    n_guarded = 0
-    if guard > 0.0:
-        n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
-                                       ch_marks, protected)
-    n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
-                               hits_unknown) if grow else 0
     if grow:
         unknown_walks(ref, ranges, expected, directions, found, short, into, unknown_reach)
     else:
         into[:] = False
+    n_guarded = 0
+    if guard > 0.0:
+        guard_needed(sensor, hits, verdict, removed_select, removed_reach, into,
+                     unknown_reach, guard, increment, need)
+        n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
+                                       ch_marks, protected, need)
+    n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
+                               hits_unknown) if grow else 0
     if gaps > 0:
         for i in range(ranges.shape[0]):
             if margin > 0.0 and margin < ranges[i]:

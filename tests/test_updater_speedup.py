@@ -346,6 +346,11 @@ def test_the_guard_around_the_hits_near_a_changed_walk_flags_as_the_whole_guard(
                    -math.sqrt(2.0), fov / n, narrow)
     assert guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_reach,
                               radius, narrow) != every
+    # walks from a quarter of the beams: every valid hit, not worth sorting out
+    into = (np.arange(n) % 4 == 0) & (verdict != K.INVALID)
+    K.guard_needed(sensor, hits, verdict, verdict, reach, into, np.ones(n), radius, fov / n,
+                   need)
+    assert np.array_equal(need, verdict != K.INVALID)
 
 
 def test_a_walk_stops_at_the_cap_as_the_listed_walk_does():

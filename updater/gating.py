@@ -85,7 +85,24 @@ class Gate:
         # views of each direction from the place of the last scan processed for moving
         self.turn_views = np.zeros(DIRECTION_BINS, np.int64)
         self._by_turn = False      # the scan just let through was for turning alone ...
-        self._seen = np.ones(DIRECTION_BINS, bool)   # ... and saw these directions
+        self._view = (0.0, 360.0)  # ... and saw about this heading [rad] this angle [deg]
+
+    # Which directions a scan sees is worked out only when a rule reads it: most scans are
+    # let through for moving, and their views are read, if ever, at a later turn.
+    @property
+    def turn_views(self) -> np.ndarray:
+        if self._views_of is not None:
+            self._views = self._seen(*self._views_of).astype(np.int64)
+            self._views_of = None
+        return self._views
+
+    @turn_views.setter
+    def turn_views(self, views: np.ndarray) -> None:
+        self._views, self._views_of = views, None
+
+    def _seen(self, heading: float, fov_deg: float) -> np.ndarray:
+        return directions_seen(heading, fov_deg) if self.config.gate_turn_cover \
+            else _EVERY_DIRECTION
 
     def check(self, t: float, pose: Pose2D, from_odometry: bool, fov_deg: float = 360.0) -> str:
         """"" when the scan at time ``t`` [s] may be processed, else why not. ``fov_deg``: the
@@ -102,8 +119,7 @@ class Gate:
         else:
             self._observe_motion(t, pose, from_odometry)
         self._by_turn = False
-        self._seen = directions_seen(pose.theta, fov_deg) if self.config.gate_turn_cover \
-            else _EVERY_DIRECTION
+        self._view = (pose.theta, fov_deg)
         if math.isnan(self.proc_t):
             return ""
         return self._reason(t, pose)
@@ -111,9 +127,9 @@ class Gate:
     def mark_processed(self, t: float, pose: Pose2D) -> None:
         self.proc_t, self.proc_x, self.proc_y, self.proc_th = t, pose.x, pose.y, pose.theta
         if self._by_turn:
-            self.turn_views = self.turn_views + self._seen
+            self.turn_views = self.turn_views + self._seen(*self._view)
         else:
-            self.turn_views = self._seen.astype(np.int64)
+            self._views_of = self._view     # those of this scan alone
 
     def _sample(self, t, pose):
         self.last_t, self.last_x, self.last_y, self.last_th = t, pose.x, pose.y, pose.theta
@@ -146,7 +162,7 @@ class Gate:
         turned = turn >= cfg.gate_min_rotation_deg
         self._by_turn = turned and not moved
         if self._by_turn and cfg.gate_turn_cover \
-                and self.turn_views[self._seen].min(initial=cfg.gate_turn_views) \
+                and self.turn_views[self._seen(*self._view)].min(initial=cfg.gate_turn_views) \
                 >= cfg.gate_turn_views:
             return GATED_TURN_VIEWS
         return "" if moved or turned else GATED_NO_MOTION

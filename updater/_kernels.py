@@ -548,12 +548,16 @@ def flag_removed_obstacles(ref, sensor, hits, reach, verdict, marks, cells, out)
 
 
 @njit(cache=True)
-def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
+def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n, new=None):
     """New obstacles: the hit cell of each CHANGE beam i, if every cell of ``ref`` within
     ``tol[i]`` (tol(r_i), grid units) of the hit is free, appended to ``out`` from position n;
-    each cell once (``marks``). Returns the new count."""
+    each cell once (``marks``). ``new``: which beams are such, worked out already
+    (``unmark_changing``). Returns the new count."""
     for i in range(hits.shape[0]):
-        if verdict[i] != CHANGE or not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
+        if verdict[i] != CHANGE:
+            continue
+        if not (new[i] if new is not None else disc_is_free(ref, hits[i, 0], hits[i, 1],
+                                                            tol[i])):
             continue
         idx = hit_cell(ref, hits[i, 0], hits[i, 1])
         if idx >= 0 and test_and_set(marks, idx):     # off the map only with tol 0
@@ -563,16 +567,18 @@ def flag_new_obstacles(ref, hits, tol, verdict, marks, out, n):
 
 
 @njit(cache=True)
-def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks):
+def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks, out_new):
     """Clear the unchanged-flag marks (``un_marks``, set between scans on the free cells whose
     buffers are settled: ``settled_marks``) of the free cells that take a changed flag this
     scan, before the walks: the new-obstacle flags (``flag_new_obstacles``, with the seen
     surfaces' marks in ``ch_marks``) and the ``fill_gaps`` flags (``gaps`` > 0: the clearance
     of ``flag_gaps``, which flags each such cell that is not a new obstacle). Those flags come
-    after the walks, and after a changed flag an unchanged one counts."""
+    after the walks, and after a changed flag an unchanged one counts. ``out_new`` gets which
+    beams are new obstacles, for ``flag_new_obstacles``."""
     for i in range(hits.shape[0]):
+        out_new[i] = verdict[i] == CHANGE and disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i])
         if verdict[i] == CHANGE:
-            if not disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i]):
+            if not out_new[i]:
                 continue
         elif verdict[i] != UNCHANGED or gaps == 0 or \
                 not square_is_free(ref, hits[i, 0], hits[i, 1], gaps):
@@ -1130,21 +1136,22 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
               removed_reach, tol, free_reach, expected, directions, found, guard,
               unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap, skips,
               ch_marks, un_marks, hit_marks, protected, hits_unknown, into, unknown_reach,
-              need, changed, unchanged):
+              scratch, changed, unchanged):
     """The flags of a scan past the lost check, as ``MapUpdater``'s steps (``updater.steps``)
-    give them one after the other: the seen-surface guard (radius ``guard``, 0: none; around
-    the hits that ``guard_needed`` finds near a walk the guard changes, into the scratch
-    ``need``), the unknown cells hit (``grow``), the removed-obstacle walks, the new-obstacle
-    flags, the walks into unknown space, the guard released, ``fill_gaps`` (clearance ``gaps``, 0: off; the
-    free walks then reach to ``margin`` short of the hit where that is further), the free
-    walks, the unchanged flags of occupied cells, the hits that confirm M's surfaces
-    (``confirm``), and the unknown hits' marks released. One call instead of a dozen: each
-    call from Python has a fixed cost. The walks are ``walk_scan``'s, one per beam, before the
-    new-obstacle flags (a free hit cell: no walk flags one) and the guard's release (which the
-    free walks, whose marks are their own, do not see), with ``walk_beams``' shortcuts:
-    ``clear`` (``clear_blocks`` of ``ref``) and the free walks' ``free_walk_skips``
-    (``increment``, ``wrap``), written to the scratch ``skips``. Returns (changed flags,
-    new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells hit)."""
+    give them one after the other: the seen-surface guard (radius ``guard``, 0: none; around the
+    hits that ``guard_needed`` finds near a walk the guard changes, into the scratch
+    ``scratch``, a bool per beam, which then holds the new obstacles' beams), the unknown cells
+    hit (``grow``), the removed-obstacle walks, the new-obstacle flags, the walks into unknown
+    space, the guard released, ``fill_gaps`` (clearance ``gaps``, 0: off; the free walks then
+    reach to ``margin`` short of the hit where that is further), the free walks, the unchanged
+    flags of occupied cells, the hits that confirm M's surfaces (``confirm``), and the unknown
+    hits' marks released. One call instead of a dozen: each call from Python has a fixed cost.
+    The walks are ``walk_scan``'s, one per beam, before the new-obstacle flags (a free hit cell:
+    no walk flags one) and the guard's release (which the free walks, whose marks are their own,
+    do not see), with ``walk_beams``' shortcuts: ``clear`` (``clear_blocks`` of ``ref``) and the
+    free walks' ``free_walk_skips`` (``increment``, ``wrap``), written to the scratch ``skips``.
+    Returns (changed flags, new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells
+    hit)."""
     if grow:
         unknown_walks(ref, ranges, expected, directions, found, short, into, unknown_reach)
     else:
@@ -1152,9 +1159,9 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
     n_guarded = 0
     if guard > 0.0:
         guard_needed(sensor, hits, verdict, removed_select, removed_reach, into,
-                     unknown_reach, guard, increment, need)
+                     unknown_reach, guard, increment, scratch)
         n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard, unknown_guard,
-                                       ch_marks, protected, need)
+                                       ch_marks, protected, scratch)
     n_hits = list_unknown_hits(ref, enclosed, hits, verdict, hit_marks, ch_marks,
                                hits_unknown) if grow else 0
     if gaps > 0:
@@ -1162,11 +1169,11 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
             if margin > 0.0 and margin < ranges[i]:
                 free_reach[i] = np.maximum(free_reach[i], 1.0 - margin / ranges[i])
     free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
-    unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks)
+    unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks, scratch)
     n, n_un = walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
                         verdict, free_reach, skips, into, unknown_reach, cap, ch_marks,
                         un_marks, changed, 0, unchanged, 0)
-    n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n)
+    n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n, scratch)
     n_new = n_ch - n
     clear_bits(ch_marks, protected, n_guarded)
     n_gaps = 0

@@ -98,7 +98,7 @@ class Workspace:
             self.verdict = np.zeros(n, np.int8)
             self.measured = np.zeros((n, 2), np.float64)
             self.into = np.zeros(n, np.bool_)
-            self.need = np.zeros(n, np.bool_)
+            self.scratch = np.zeros(n, np.bool_)
             for name in ("pairing", "tol", "skip", "reach", "free_reach", "unknown_reach",
                          "skips"):
                 setattr(self, name, np.zeros(n, np.float64))
@@ -489,7 +489,7 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
         increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
         un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
         hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
-        need=ws.need, changed=ws.changed, unchanged=ws.unchanged)
+        scratch=ws.scratch, changed=ws.changed, unchanged=ws.unchanged)
     return int(n_ch), int(n_new + n_gaps), int(n_un), int(n_hits)
 
 

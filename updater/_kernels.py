@@ -576,12 +576,11 @@ def unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks, out_new):
     after the walks, and after a changed flag an unchanged one counts. ``out_new`` gets which
     beams are new obstacles, for ``flag_new_obstacles``."""
     for i in range(hits.shape[0]):
-        out_new[i] = verdict[i] == CHANGE and disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i])
-        if verdict[i] == CHANGE:
-            if not out_new[i]:
-                continue
-        elif verdict[i] != UNCHANGED or gaps == 0 or \
-                not square_is_free(ref, hits[i, 0], hits[i, 1], gaps):
+        new = verdict[i] == CHANGE and disc_is_free(ref, hits[i, 0], hits[i, 1], tol[i])
+        out_new[i] = new
+        gap = verdict[i] == UNCHANGED and gaps > 0 and \
+            square_is_free(ref, hits[i, 0], hits[i, 1], gaps)
+        if not (new or gap):
             continue
         idx = hit_cell(ref, hits[i, 0], hits[i, 1])
         if idx >= 0 and (verdict[i] == UNCHANGED or not bit_get(ch_marks, idx)):

@@ -17,7 +17,7 @@ from gridmap import FREE, OCCUPIED, Pose2D
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import MapUpdater, UpdaterConfig
 from updater.gating import (GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS,
-                            Gate, directions_seen)
+                            Gate, bins_seen, directions_seen)
 
 try:
     import synthetic_room as world
@@ -111,6 +111,23 @@ def test_a_narrow_scan_counts_the_direction_it_faces():
     reasons = turn_in_place(ROBOT, 4.0)              # a 4 deg beam fan turning in place
     # 720 deg in views of at least 20 deg, each bin of 10 deg seen twice at most
     assert 2 <= reasons[:360].count("") - 1 <= 720 // 20
+
+
+def test_the_bins_from_the_arc_ends_are_the_bins_every_bin_is_tested_for():
+    # headings round the circle and past it, on the bins' edges and centres, and fields from
+    # none to nearly a turn (the arc's ends then meet behind the scan)
+    rng = np.random.default_rng(5)
+    headings = np.concatenate([rng.uniform(-8.0, 8.0, 400),
+                               np.radians(np.arange(-725.0, 725.0, 2.5))])
+    fields = [0.0, 0.5, 4.0, 9.99, 10.0, 20.0, 90.0, 180.0, 270.0, 340.0, 350.0, 355.0, 359.9]
+    for heading in headings:
+        for fov in fields + [float(rng.uniform(0.0, 360.0))]:
+            got = bins_seen(float(heading), fov)
+            want = directions_seen(float(heading), fov).nonzero()[0].tolist()
+            assert sorted(got) == want and len(set(got)) == len(got), (heading, fov)
+    assert sorted(bins_seen(math.radians(-3.0), 4.0)) == [35]
+    # 17.2 deg: the centres at 195 and 205 deg lie 177.8 and 172.2 deg from it
+    assert len(bins_seen(0.3, 359.9)) == 36 and len(bins_seen(0.3, 340.0)) == 34
 
 
 def test_turning_in_place_is_unbounded_without_the_rule():

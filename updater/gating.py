@@ -49,6 +49,36 @@ DIRECTION_BIN_DEG = 10.0
 DIRECTION_BINS = int(round(360.0 / DIRECTION_BIN_DEG))
 _CENTRES = (np.arange(DIRECTION_BINS) + 0.5) * DIRECTION_BIN_DEG
 _EVERY_DIRECTION = np.ones(DIRECTION_BINS, bool)
+_ALL_BINS = list(range(DIRECTION_BINS))
+
+
+def _sees(k: int, degrees: float, half: float) -> bool:
+    """``directions_seen``'s test for bin k (any whole number: taken round the circle), in the
+    same floating-point operations."""
+    centre = (k % DIRECTION_BINS + 0.5) * DIRECTION_BIN_DEG
+    return abs((centre - degrees + 180.0) % 360.0 - 180.0) <= half
+
+
+def bins_seen(heading: float, fov_deg: float) -> list[int]:
+    """The bins ``directions_seen`` sets, as a list of indices (each once, in no order). A scan
+    sees an arc of bins, so only the bins at its ends are put to the test (a NumPy pass over
+    every bin cost a scan more than the rest of the gate)."""
+    if fov_deg >= 360.0:
+        return _ALL_BINS
+    degrees, half = math.degrees(heading), fov_deg / 2.0
+    own = int(degrees % 360.0 // DIRECTION_BIN_DEG) % DIRECTION_BINS
+    if not _sees(own, degrees, half) and not _sees(own - 1, degrees, half) \
+            and not _sees(own + 1, degrees, half):
+        return [own]        # an arc narrower than a bin, between two centres
+    lo = math.floor((degrees - half) / DIRECTION_BIN_DEG - 0.5)
+    hi = math.ceil((degrees + half) / DIRECTION_BIN_DEG - 0.5)
+    # the bounds are a bin out at most either way: the test decides
+    lo = next(k for k in range(lo - 1, lo + 3) if _sees(k, degrees, half))
+    hi = next(k for k in range(hi + 1, hi - 3, -1) if _sees(k, degrees, half))
+    if hi - lo >= DIRECTION_BINS - 2:     # the ends meet behind the scan: test every bin
+        return [k for k in _ALL_BINS if k == own or _sees(k, degrees, half)]
+    seen = [k % DIRECTION_BINS for k in range(lo, hi + 1)]
+    return seen if own in seen else seen + [own]
 
 
 def directions_seen(heading: float, fov_deg: float) -> np.ndarray:
@@ -86,23 +116,33 @@ class Gate:
         self.turn_views = np.zeros(DIRECTION_BINS, np.int64)
         self._by_turn = False      # the scan just let through was for turning alone ...
         self._view = (0.0, 360.0)  # ... and saw about this heading [rad] this angle [deg]
+        self._last_seen = (None, [])
 
     # Which directions a scan sees is worked out only when a rule reads it: most scans are
     # let through for moving, and their views are read, if ever, at a later turn.
     @property
     def turn_views(self) -> np.ndarray:
+        return np.array(self._counted(), np.int64)
+
+    @turn_views.setter
+    def turn_views(self, views) -> None:
+        self._views, self._views_of = [int(v) for v in views], None
+
+    def _counted(self) -> list[int]:
+        """The views of each direction (a list: the rules read and add a few bins a scan)."""
         if self._views_of is not None:
-            self._views = self._seen(*self._views_of).astype(np.int64)
+            self._views = [0] * DIRECTION_BINS
+            for k in self._seen(*self._views_of):
+                self._views[k] = 1
             self._views_of = None
         return self._views
 
-    @turn_views.setter
-    def turn_views(self, views: np.ndarray) -> None:
-        self._views, self._views_of = views, None
-
-    def _seen(self, heading: float, fov_deg: float) -> np.ndarray:
-        return directions_seen(heading, fov_deg) if self.config.gate_turn_cover \
-            else _EVERY_DIRECTION
+    def _seen(self, heading: float, fov_deg: float) -> list[int]:
+        if not self.config.gate_turn_cover:
+            return _ALL_BINS
+        if self._last_seen[0] != (heading, fov_deg):   # a scan's turn rule, then its views
+            self._last_seen = ((heading, fov_deg), bins_seen(heading, fov_deg))
+        return self._last_seen[1]
 
     def check(self, t: float, pose: Pose2D, from_odometry: bool, fov_deg: float = 360.0) -> str:
         """"" when the scan at time ``t`` [s] may be processed, else why not. ``fov_deg``: the
@@ -127,7 +167,9 @@ class Gate:
     def mark_processed(self, t: float, pose: Pose2D) -> None:
         self.proc_t, self.proc_x, self.proc_y, self.proc_th = t, pose.x, pose.y, pose.theta
         if self._by_turn:
-            self.turn_views = self.turn_views + self._seen(*self._view)
+            views = self._counted()
+            for k in self._seen(*self._view):
+                views[k] += 1
         else:
             self._views_of = self._view     # those of this scan alone
 
@@ -161,10 +203,10 @@ class Gate:
         turn = math.degrees(abs(wrap_angle(pose.theta - self.proc_th)))
         turned = turn >= cfg.gate_min_rotation_deg
         self._by_turn = turned and not moved
-        if self._by_turn and cfg.gate_turn_cover \
-                and self.turn_views[self._seen(*self._view)].min(initial=cfg.gate_turn_views) \
-                >= cfg.gate_turn_views:
-            return GATED_TURN_VIEWS
+        if self._by_turn and cfg.gate_turn_cover:
+            views = self._counted()
+            if min(views[k] for k in self._seen(*self._view)) >= cfg.gate_turn_views:
+                return GATED_TURN_VIEWS
         return "" if moved or turned else GATED_NO_MOTION
 
     # --- saving and restoring -----------------------------------------------------------------

@@ -982,3 +982,34 @@ def test_apply_changes_against_reference(close):
     assert (out.reshape(data.shape) == expect).all()
     assert closed == ((expect == OCC) & (data == UNK) & ~decided).sum()
     assert closed > 0 if close else closed == 0
+
+
+def test_a_workspace_kept_across_layouts_and_configurations_classifies_as_a_fresh_one():
+    # the workspace keeps what a scan's layout and the configuration fix (Workspace.layout,
+    # settings, buffer_rules, the views of the measured beams' virtual beams): each scan must
+    # come out as it does from a workspace that has seen nothing before
+    data, scan, sensor = room_scene(2)
+    half = Scan(scan.ranges[::2].copy(), scan.angle_min, 2 * scan.angle_increment,
+                scan.range_min, scan.range_max)
+    part = Scan(scan.ranges[:300].copy(), scan.angle_min, scan.angle_increment,
+                scan.range_min, 4.0)
+    plain, wide = UpdaterConfig(), UpdaterConfig(window_deg=8.0, virtual_to_measured_ratio=2)
+    kept, changes = steps.Workspace(), []
+    fields = ("hits", "pairing", "tol", "free_reach", "verdict", "own_expected", "own_found",
+              "own_direction", "change")
+    for s, cfg in ((scan, plain), (half, plain), (part, plain), (part, wide), (scan, wide),
+                   (scan, plain), (half, wide)):
+        got = steps.classify_beams(data, s, sensor, 0.05, cfg, kept)
+        fresh_ws = steps.Workspace()
+        want = steps.classify_beams(data, s, sensor, 0.05, cfg, fresh_ws)
+        assert (got.valid, got.raw_changes, got.changes, got.wrap) == \
+            (want.valid, want.raw_changes, want.changes, want.wrap)
+        for name in fields:
+            a, b = getattr(got, name), getattr(want, name)
+            assert a.shape == b.shape and np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), \
+                name
+        assert kept.settings(cfg, 0.05) == fresh_ws.settings(cfg, 0.05)
+        assert kept.buffer_rules(cfg) == fresh_ws.buffer_rules(cfg)
+        assert got.own_expected.shape == (s.beams, 2)
+        changes.append(got.changes)
+    assert min(changes[:2]) > 0 and not part.covers_full_circle()

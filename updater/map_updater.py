@@ -256,9 +256,8 @@ class MapUpdater:
         """(pose, its grid coordinates, None, "") for a scan to process: the given sensor pose,
         or the one the pose check refined it to; (pose or None, ..., status, reason) for one to
         skip."""
-        placed = sensor_pose
+        placed, refused = sensor_pose, None
         sensor = steps.to_grid(placed, self._origin, self._res)
-        verdict = PoseVerdict.accepted()
         if pose_check is not None and self._on_map(sensor):
             verdict = pose_check()
             if not isinstance(verdict, PoseVerdict):
@@ -270,10 +269,12 @@ class MapUpdater:
                                        f"{verdict.sensor_pose}")
                 placed = verdict.sensor_pose
                 sensor = steps.to_grid(placed, self._origin, self._res)
+            if verdict.is_refused:
+                refused = verdict.reason
         if not self._on_map(sensor):
             return placed, sensor, ScanStatus.OFF_MAP, SKIPPED_OFF_MAP
-        if verdict.is_refused:
-            return None, sensor, ScanStatus.REFUSED, verdict.reason
+        if refused is not None:
+            return None, sensor, ScanStatus.REFUSED, refused
         return placed, sensor, None, ""
 
     def _on_map(self, sensor: np.ndarray) -> bool:

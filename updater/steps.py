@@ -86,6 +86,11 @@ class Workspace:
         self._flags = -1
         self._moved = -1
         self._protected = -1
+        self._own = None
+        self._layout = self._layout_cfg = None
+        self._settings = self._settings_cfg = None
+        self._rules = self._rules_cfg = None
+        self.missing_tiles = np.zeros(0, np.int64)
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:
@@ -107,9 +112,19 @@ class Workspace:
             self.expected = np.zeros((m, 2), np.float64)
             self.found = np.zeros(m, np.bool_)
             self.virtual = np.zeros((m, 2), np.float64)
+            self._own = None
         if walk > self._walk:
             self._walk = walk
             self.cells = np.zeros((2, walk), np.int64)    # rows, cols of one walk
+
+    def own(self, ratio: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The virtual beams of the n measured beams (every ``ratio``-th): views of their
+        expected points, whether each found a blocked cell, and their directions."""
+        if self._own is None or self._own[0] != (ratio, n):
+            own = slice(None, None, ratio) if ratio != 1 else slice(None)
+            self._own = ((ratio, n), (self.expected[own][:n], self.found[own][:n],
+                                      self.virtual[own][:n]))
+        return self._own[1]
 
     def for_flags(self, capacity: int) -> None:
         if capacity > self._flags:
@@ -123,6 +138,12 @@ class Workspace:
             self._unknown_hits = beams
             self.hits_unknown = np.zeros(beams, np.int32)
 
+    def for_missing_tiles(self, n: int) -> np.ndarray:
+        """Room for the tiles of n hit cells (``push_hits``)."""
+        if n > self.missing_tiles.shape[0]:
+            self.missing_tiles = np.zeros(n, np.int64)
+        return self.missing_tiles
+
     def for_moved(self, capacity: int) -> None:
         if capacity > self._moved:
             self._moved = int(capacity * 1.25) + 64
@@ -132,6 +153,38 @@ class Workspace:
         if capacity > self._protected:
             self._protected = int(capacity * 1.25) + 64
             self.protected = np.zeros(self._protected, np.int32)
+
+    def layout(self, scan: Scan, cfg: UpdaterConfig, res: float) -> Layout:
+        """The scan's ``Layout``, worked out again only when the beams' layout, the
+        configuration (the same object) or the resolution changes; the per-beam arrays are
+        sized for it."""
+        key = (scan.ranges.size, scan.angle_min, scan.angle_increment, scan.range_min,
+               scan.range_max, res)
+        got = self._layout
+        if got is None or got.key != key or self._layout_cfg is not cfg:
+            got = Layout.of(scan, cfg, res, key)
+            self._layout, self._layout_cfg = got, cfg
+        n, ratio = got.key[0], cfg.virtual_to_measured_ratio
+        self.for_beams(n, n * ratio, got.walk)
+        return got
+
+    def settings(self, cfg: UpdaterConfig, res: float) -> Settings:
+        """The configuration's ``Settings`` (kept while the configuration is the same object
+        and the resolution the same)."""
+        got = self._settings
+        if got is None or self._settings_cfg is not cfg or got.res != res:
+            got = Settings.of(cfg, res)
+            self._settings, self._settings_cfg = got, cfg
+        return got
+
+    def buffer_rules(self, cfg: UpdaterConfig) -> tuple[int, int, int, int]:
+        """(``buffer_mask``, ``count_shift``, ``settled_bound``, ``support_mode``) of the
+        configuration (kept while it is the same object)."""
+        if self._rules_cfg is not cfg:
+            self._rules_cfg = cfg
+            self._rules = (buffer_mask(cfg), count_shift(cfg), settled_bound(cfg),
+                           support_mode(cfg))
+        return self._rules
 
     def distances(self, cfg: UpdaterConfig) -> np.ndarray:
         """The parameters of the range-dependent distances, for ``kernels().beam_distances``
@@ -143,6 +196,60 @@ class Workspace:
 
     def nbytes(self) -> int:
         return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What the classifier takes from a scan's layout (its beams, angles and range limits), the
+    configuration and the resolution: the same for every scan of a sensor, so worked out once
+    (``Workspace.layout``). Each is a few operations, but a scan of a few hundred beams feels
+    a dozen of them."""
+
+    key: tuple          # (beams, angle_min, angle_increment, range_min, range_max, res)
+    r_hi: float         # [m] a valid range is below it: min(max_range, range_max)
+    max_len: float      # [grid units] the virtual beams' length
+    step: float         # [rad] between virtual beams
+    half: int           # the comparison window's half width [virtual beams]
+    wrap: bool          # the scan covers 360 degrees: the window wraps round its ends
+    even: bool          # ... with even spacing across its ends too (the free walks' skips)
+    walk: int           # [cells] room for one walk's cells
+
+    @classmethod
+    def of(cls, scan: Scan, cfg: UpdaterConfig, res: float, key: tuple) -> Layout:
+        n = scan.beams
+        ratio = cfg.virtual_to_measured_ratio
+        r_hi = min(cfg.max_range, scan.range_max)
+        max_len = (r_hi + cfg.cast_margin) / res
+        step = scan.angle_increment / ratio
+        # a window wider than the scan searches nothing more; a tiny angle_increment (1e-12
+        # rad) would otherwise ask the kernel for 1e11 beams, holding the interpreter for
+        # hours (and below 1e-308 the quotient is inf, which no integer holds)
+        span = math.radians(cfg.window_deg) / abs(step) if n else 0.0
+        half = n * ratio if span >= n * ratio else int(math.floor(span + 1e-9))
+        wrap = scan.covers_full_circle()
+        even = wrap and abs(scan.fov() - 2 * math.pi) <= 0.05 * abs(scan.angle_increment)
+        return cls(key, r_hi, max_len, step, half, wrap, even,
+                   2 * int(math.ceil(max_len)) + 8)
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The kernels' parameters that follow from the configuration and the resolution alone,
+    worked out once per configuration (``Workspace.settings``)."""
+
+    res: float
+    radius: float         # the seen-surface guard's radius [grid units]
+    side: int             # the side of its square [cells]
+    unknown_guard: float  # ``unknown_guard``
+    short: float          # [m] the walks into unknown space stop this far short of the hit
+    gaps: int             # fill_gaps' clearance [cells]; 0: off
+
+    @classmethod
+    def of(cls, cfg: UpdaterConfig, res: float) -> Settings:
+        radius = cfg.seen_surface_radius / res
+        gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
+        return cls(res, radius, 2 * int(math.ceil(radius)) + 1, unknown_guard(cfg, res),
+                   max(cfg.seen_surface_radius, res), gaps)
 
 
 def to_grid(sensor_pose, origin, res) -> np.ndarray:
@@ -184,38 +291,27 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     clear = clear_blocks(ref) if clear is None else clear
     n = scan.beams
     ratio = cfg.virtual_to_measured_ratio
-    r_hi = min(cfg.max_range, scan.range_max)
-    max_len = (r_hi + cfg.cast_margin) / res
-    ws.for_beams(n, n * ratio, 2 * int(math.ceil(max_len)) + 8)
-    step = scan.angle_increment / ratio
+    lay = ws.layout(scan, cfg, res)
     n_valid, bound = k.prepare_beams(
-        ranges=scan.ranges, r_lo=float(scan.range_min), r_hi=float(r_hi), sensor=sensor,
-        angle_min=scan.angle_min, step=step, increment=scan.angle_increment, ratio=ratio,
+        ranges=scan.ranges, r_lo=float(scan.range_min), r_hi=float(lay.r_hi), sensor=sensor,
+        angle_min=scan.angle_min, step=lay.step, increment=scan.angle_increment, ratio=ratio,
         res=res, dist=ws.distances(cfg), out_r=ws.r, out_valid=ws.valid,
         out_virtual=ws.virtual, out_measured=ws.measured, out_hits=ws.hits,
         out_pairing=ws.pairing, out_tol=ws.tol, out_skip=ws.skip, out_reach=ws.reach,
         out_free_reach=ws.free_reach)
-    # a window wider than the scan searches nothing more; a tiny angle_increment (1e-12 rad)
-    # would otherwise ask the kernel for 1e11 beams, holding the interpreter for hours (and
-    # below 1e-308 the quotient is inf, which no integer holds)
-    span = math.radians(cfg.window_deg) / abs(step) if n else 0.0
-    half = n * ratio if span >= n * ratio else int(math.floor(span + 1e-9))
-    wrap = scan.covers_full_circle()
     raw, kept = k.classify_scan(
-        ref, clear, sensor, virtual=ws.virtual, max_len=max_len, hits=ws.hits, valid=ws.valid,
-        pairing=ws.pairing, half_window=half, wrap=wrap, min_run=cfg.min_run,
-        n_skip=cfg.n_skip, out_expected=ws.expected, out_found=ws.found, out_change=ws.change,
-        out_keep=ws.keep, out_verdict=ws.verdict, min_width=cfg.min_run_width / res)
+        ref, clear, sensor, virtual=ws.virtual, max_len=lay.max_len, hits=ws.hits,
+        valid=ws.valid, pairing=ws.pairing, half_window=lay.half, wrap=lay.wrap,
+        min_run=cfg.min_run, n_skip=cfg.n_skip, out_expected=ws.expected, out_found=ws.found,
+        out_change=ws.change, out_keep=ws.keep, out_verdict=ws.verdict,
+        min_width=cfg.min_run_width / res)
     # No evaluator can flag more cells than the bound or the map holds; the n more leave room
     # for an unchanged flag at each beam's hit cell.
     ws.for_flags(min(bound, ref.size) + n)
-    own = slice(None, None, ratio) if ratio != 1 else slice(None)
-    # the free walks' skips count on even spacing, across the scan's ends too
-    even = wrap and abs(scan.fov() - 2 * math.pi) <= 0.05 * abs(scan.angle_increment)
+    expected, found, direction = ws.own(ratio, n)
     return Beams(sensor, ws.r, ws.hits, ws.pairing, ws.tol, ws.skip, ws.free_reach,
-                 ws.verdict, n_valid, raw, kept, ws.expected[own][:n], ws.found[own][:n],
-                 ws.virtual[own][:n], ws.change, ws.reach, clear, abs(scan.angle_increment),
-                 even)
+                 ws.verdict, n_valid, raw, kept, expected, found, direction, ws.change, ws.reach,
+                 clear, abs(scan.angle_increment), lay.even)
 
 
 def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
@@ -440,13 +536,13 @@ def push_hits(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, n_hits: in
     many) is drawn: occupied in the output. Returns the change of the drawn count."""
     hit_cells = ws.hits_unknown[:n_hits]
     # the tiles of the cells hit: checked in a kernel, made (rarely) in NumPy
-    missing = np.empty(n_hits, np.int64)
+    missing = ws.for_missing_tiles(n_hits)
     n_missing = kernels().missing_hit_tiles(tiles.directory, ref.shape[1], hit_cells, missing)
     if n_missing:
         tiles.make(missing[:n_missing])
     return int(kernels().push_hits(tiles.directory, tiles.pool, ref.shape[1], ref.reshape(-1),
                                    enclosed, hit_cells=hit_cells,
-                                   changed=ws.changed[:n_changed], mask=buffer_mask(cfg),
+                                   changed=ws.changed[:n_changed], mask=ws.buffer_rules(cfg)[0],
                                    threshold=cfg.threshold, few=cfg.unanimous_min,
                                    hit_marks=hit_marks, drawn=drawn))
 
@@ -470,21 +566,19 @@ def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     ``release_unknown_hits`` do one after the other, in one kernel call (``marks``: the
     changed-flag, unchanged-flag and hit marks). Returns (changed flags, new-obstacle and
     fill_gaps flags, unchanged flags, unknown cells hit, listed in ``ws.hits_unknown``)."""
-    radius = cfg.seen_surface_radius / res
-    guard = radius if radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
-    side = 2 * int(math.ceil(radius)) + 1
-    ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size) if guard else 0)
+    st = ws.settings(cfg, res)
+    guard = st.radius if st.radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
+    ws.for_protected(min(beams.hits.shape[0] * st.side * st.side, ref.size) if guard else 0)
     ws.for_unknown_hits(beams.hits.shape[0])
     ch_marks, un_marks, hit_marks = marks
-    gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
     n_ch, n_new, n_gaps, n_un, n_hits = kernels().flag_scan(
         ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
         verdict=beams.verdict, removed_select=removed_select(beams, cfg),
         removed_reach=removed_reach(beams), tol=beams.tol,
         free_reach=beams.free_reach, expected=beams.own_expected,
         directions=beams.own_direction, found=beams.own_found, guard=guard,
-        unknown_guard=unknown_guard(cfg, res), grow=cfg.grow_into_unknown,
-        short=max(cfg.seen_surface_radius, res), gaps=gaps, margin=cfg.fill_gaps_free_margin,
+        unknown_guard=st.unknown_guard, grow=cfg.grow_into_unknown, short=st.short,
+        gaps=st.gaps, margin=cfg.fill_gaps_free_margin,
         confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
         increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
         un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
@@ -593,11 +687,12 @@ def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.n
     the free cells whose buffers are settled (``settled_marks``). Returns the change of the
     number of changed cells."""
     ws.for_moved(n_changed + n_unchanged)
+    mask, shift, full, support = ws.buffer_rules(cfg)
     return int(kernels().push_and_decide(
         hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
-        unchanged=ws.unchanged[:n_unchanged], mask=buffer_mask(cfg), threshold=cfg.threshold,
-        few=cfg.unanimous_min, support=support_mode(cfg), width=width, ch_marks=ch_marks,
-        un_marks=un_marks, moved=ws.moved, shift=count_shift(cfg), full=settled_bound(cfg)))
+        unchanged=ws.unchanged[:n_unchanged], mask=mask, threshold=cfg.threshold,
+        few=cfg.unanimous_min, support=support, width=width, ch_marks=ch_marks,
+        un_marks=un_marks, moved=ws.moved, shift=shift, full=full))
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,

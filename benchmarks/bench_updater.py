@@ -271,6 +271,61 @@ def before_after(ref: OccupancyGrid, config: UpdaterConfig, calls, pairs: int) -
             "passes": medians, "identical": bool(np.array_equal(maps["before"], maps["after"]))}
 
 
+def kernel_modules(cls) -> list:
+    """The kernel modules whose functions ``cls``'s Python calls: its package's, and gridmap's."""
+    import importlib
+
+    from gridmap import _kernels as grid
+
+    package = cls.__module__.rsplit(".", 1)[0]
+    found = [importlib.import_module(f"{package}._kernels"), grid]
+    try:
+        found.append(importlib.import_module(f"{package}._grid_kernels"))
+    except ImportError:
+        pass
+    return found
+
+
+def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls, passes: int) -> dict:
+    """Medians per processed scan [ms] of ``cls`` on ``calls``: the whole call ("all"), the
+    kernels that Python calls, each timed around its call ("kernels": their work and the cost
+    of calling them), and the rest ("Python"). The median of the passes' medians."""
+    from numba.core.registry import CPUDispatcher
+
+    kernels = {(m, name): f for m in kernel_modules(cls) for name, f in vars(m).items()
+               if isinstance(f, CPUDispatcher)}
+    spent = [0.0]
+
+    def timed(fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            out = fn(*args, **kwargs)
+            spent[0] += time.perf_counter() - t0
+            return out
+        return call
+
+    times = {"all": [], "kernels": [], "Python": []}
+    for _ in range(passes):
+        for (module, name), fn in kernels.items():
+            setattr(module, name, timed(fn))
+        updater, per_scan = cls(ref, config), []
+        try:
+            for scan, pose, odometry in calls:
+                spent[0] = 0.0
+                t0 = time.perf_counter()
+                report = updater.process(scan, pose, odometry)
+                total = time.perf_counter() - t0
+                if report.processed:
+                    per_scan.append((total * 1e3, spent[0] * 1e3))
+        finally:
+            for (module, name), fn in kernels.items():
+                setattr(module, name, fn)
+        total, kernel = np.array(per_scan).T
+        for key, values in (("all", total), ("kernels", kernel), ("Python", total - kernel)):
+            times[key].append(float(np.median(values)))
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
 def log_calls(path: Path, parts: int, tmp: Path):
     """A map of the first 1/``parts`` of a log's scans (at their recorded poses) and the calls
     ``mapupdate update`` makes of the updater when updating it with the last 1/``parts``:
@@ -314,6 +369,7 @@ def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, di
         calls = [(scan, pose, None) for scan, pose in make_scans(beams, scans_count)]
         rows.append((f"room, {beams} beams", before_after(
             reference(200), UpdaterConfig(gating=False), calls, pairs)))
+        rows[-1][1]["split"] = splits(reference(200), UpdaterConfig(gating=False), calls)
     for name, (path, parts) in LOGS.items():
         if not logs or not path.exists():
             continue
@@ -321,8 +377,32 @@ def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, di
             ref, config, calls = log_calls(path, parts, Path(tmp))
         row = before_after(ref, config, calls, pairs)
         row["scans"] = len(calls)
+        row["split"] = splits(ref, config, calls)
         rows.append((f"{name}, 180 beams, {ref.width} x {ref.height}", row))
     return rows
+
+
+def splits(ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
+    """``python_split`` of the code before, then after, 3 passes each."""
+    return {name: python_split(cls, ref, config, calls, 3)
+            for name, cls in (("before", BeforeMapUpdater), ("after", MapUpdater))}
+
+
+def print_split(rows) -> None:
+    print("The Python around the kernels and the kernels, before and after: median ms per "
+          "processed scan of the whole call, of the kernels called from Python (timers around "
+          "each call: their work and the cost of the call) and of the rest, 3 passes each "
+          "(wall time), the median of the passes:")
+    print()
+    print("| case | before: all | kernels | Python | after: all | kernels | Python "
+          "| ratio: kernels | Python |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for label, r in rows:
+        b, a = r["split"]["before"], r["split"]["after"]
+        print(f"| {label} | {b['all']:.3f} | {b['kernels']:.3f} | {b['Python']:.3f} "
+              f"| {a['all']:.3f} | {a['kernels']:.3f} | {a['Python']:.3f} "
+              f"| {b['kernels'] / a['kernels']:.2f} | {b['Python'] / a['Python']:.2f} |")
+    print()
 
 
 def print_comparison(rows, pairs: int) -> None:
@@ -411,6 +491,7 @@ def main() -> int:
     inner = time_inner(reference(200), make_scans(720, args.scans))
 
     print_comparison(compared, args.pairs)
+    print_split(compared)
     print_table(rows, parts, inner, mem, args.scans)
     missed_bar = any(r["ratio"] < SPEEDUP_BAR or not r["identical"]
                      for label, r in compared if not label.startswith("room, 1440"))

@@ -286,10 +286,10 @@ def kernel_modules(cls) -> list:
     return found
 
 
-def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls, passes: int) -> dict:
-    """Medians per processed scan [ms] of ``cls`` on ``calls``: the whole call ("all"), the
-    kernels that Python calls, each timed around its call ("kernels": their work and the cost
-    of calling them), and the rest ("Python"). The median of the passes' medians."""
+def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
+    """One pass of ``cls`` on ``calls``, the medians per processed scan [ms]: of the whole
+    call ("all"), of the kernels that Python calls, each timed around its call ("kernels":
+    their work and the cost of calling them), and of the rest ("Python")."""
     from numba.core.registry import CPUDispatcher
 
     kernels = {(m, name): f for m in kernel_modules(cls) for name, f in vars(m).items()
@@ -304,26 +304,23 @@ def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls, passes: 
             return out
         return call
 
-    times = {"all": [], "kernels": [], "Python": []}
-    for _ in range(passes):
+    for (module, name), fn in kernels.items():
+        setattr(module, name, timed(fn))
+    updater, per_scan = cls(ref, config), []
+    try:
+        for scan, pose, odometry in calls:
+            spent[0] = 0.0
+            t0 = time.perf_counter()
+            report = updater.process(scan, pose, odometry)
+            total = time.perf_counter() - t0
+            if report.processed:
+                per_scan.append((total * 1e3, spent[0] * 1e3))
+    finally:
         for (module, name), fn in kernels.items():
-            setattr(module, name, timed(fn))
-        updater, per_scan = cls(ref, config), []
-        try:
-            for scan, pose, odometry in calls:
-                spent[0] = 0.0
-                t0 = time.perf_counter()
-                report = updater.process(scan, pose, odometry)
-                total = time.perf_counter() - t0
-                if report.processed:
-                    per_scan.append((total * 1e3, spent[0] * 1e3))
-        finally:
-            for (module, name), fn in kernels.items():
-                setattr(module, name, fn)
-        total, kernel = np.array(per_scan).T
-        for key, values in (("all", total), ("kernels", kernel), ("Python", total - kernel)):
-            times[key].append(float(np.median(values)))
-    return {k: float(np.median(v)) for k, v in times.items()}
+            setattr(module, name, fn)
+    total, kernel = np.array(per_scan).T
+    return {"all": float(np.median(total)), "kernels": float(np.median(kernel)),
+            "Python": float(np.median(total - kernel))}
 
 
 def log_calls(path: Path, parts: int, tmp: Path):
@@ -382,17 +379,23 @@ def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, di
     return rows
 
 
-def splits(ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
-    """``python_split`` of the code before, then after, 3 passes each."""
-    return {name: python_split(cls, ref, config, calls, 3)
-            for name, cls in (("before", BeforeMapUpdater), ("after", MapUpdater))}
+def splits(ref: OccupancyGrid, config: UpdaterConfig, calls, passes: int = 5) -> dict:
+    """``python_split`` of the code before and after in alternating passes: the median of
+    the passes' medians."""
+    codes = (("before", BeforeMapUpdater), ("after", MapUpdater))
+    got = {name: [] for name, _ in codes}
+    for _ in range(passes):
+        for name, cls in codes:
+            got[name].append(python_split(cls, ref, config, calls))
+    return {name: {key: float(np.median([p[key] for p in runs])) for key in runs[0]}
+            for name, runs in got.items()}
 
 
 def print_split(rows) -> None:
     print("The Python around the kernels and the kernels, before and after: median ms per "
           "processed scan of the whole call, of the kernels called from Python (timers around "
-          "each call: their work and the cost of the call) and of the rest, 3 passes each "
-          "(wall time), the median of the passes:")
+          "each call: their work and the cost of the call) and of the rest, 5 alternating "
+          "passes each (wall time), the median of the passes:")
     print()
     print("| case | before: all | kernels | Python | after: all | kernels | Python "
           "| ratio: kernels | Python |")

@@ -19,6 +19,9 @@ scans, updated with the second half) and MIT Killian Court (the first third, upd
 last third), with ``mapupdate update``'s updater configuration, timing the updater's
 ``process`` calls alone (the scans and poses the pipeline gave it, recorded once), the median
 over the scans it processed past the gate. Times are the scan's thread CPU time.
+Then, in 5 more alternating passes each, the time of each scan split into the kernels that
+Python calls (a timer around each call) and the Python around them: where the ratio comes
+from, and where it falls short.
 
     python benchmarks/bench_updater.py [--scans N] [--pairs N] [--no-logs]
 

@@ -350,14 +350,13 @@ def guard_seen_surfaces(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: 
     pose error below a cell the rays that graze an object's corner cross its outline cells
     while the beams that hit the object say it is still there (docs/choices.md). Only scans
     with detected changes need it. Returns the count marked, for ``release_seen_surfaces``."""
-    radius = cfg.seen_surface_radius / res
-    if radius <= 0 or not (beams.changes or cfg.grow_into_unknown):
+    st = ws.settings(cfg, res)
+    if st.radius <= 0 or not (beams.changes or cfg.grow_into_unknown):
         return 0
-    side = 2 * int(math.ceil(radius)) + 1
-    ws.for_protected(min(beams.hits.shape[0] * side * side, ref.size))
-    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict, radius=radius,
-                                        unknown_radius=unknown_guard(cfg, res), marks=marks,
-                                        out=ws.protected)
+    ws.for_protected(min(beams.hits.shape[0] * st.side * st.side, ref.size))
+    return kernels().mark_seen_surfaces(ref, enclosed, beams.hits, beams.verdict,
+                                        radius=st.radius, unknown_radius=st.unknown_guard,
+                                        marks=marks, out=ws.protected)
 
 
 def unknown_guard(cfg: UpdaterConfig, res: float) -> float:
@@ -409,7 +408,7 @@ def fill_gaps(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
     hits that land there consistently. Returns (cells flagged in all, flagged here)."""
     if not cfg.fill_gaps:
         return n, 0
-    clearance = max(1, int(round(cfg.fill_gaps_clearance / res)))
+    clearance = ws.settings(cfg, res).gaps
     n_all = kernels().flag_gaps(ref, beams.hits, beams.verdict, clearance=clearance, marks=marks,
                                 out=ws.changed, n=n)
     margin = cfg.fill_gaps_free_margin
@@ -509,7 +508,7 @@ def flag_unknown_seen_through(ref: np.ndarray, beams: Beams, enclosed: np.ndarra
     shows it empty as well, and the hit cells themselves are kept from the walks. Beams whose
     expected ray ends in known space are left out: under a pose error below a cell they graze
     the corners M had as unknown. Returns the new count."""
-    short = max(cfg.seen_surface_radius, res)
+    short = ws.settings(cfg, res).short
     return int(kernels().flag_unknown_seen_through(
         ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
         expected=beams.own_expected, directions=beams.own_direction, found=beams.own_found,

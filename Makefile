@@ -31,11 +31,13 @@ postgres:
 run: setup
 	$(BIN)/mapupdate run $(ARGS)
 
+# two test processes (pytest-xdist), each test file in one of them: its module fixtures are
+# made once
 test: setup ros1 ros2 postgres
-	$(BIN)/python -m pytest -q -m "not slow" $(ARGS)
+	$(BIN)/python -m pytest -q -m "not slow" -n 2 --dist loadfile $(ARGS)
 
 test-all: setup ros1 ros2 postgres
-	$(BIN)/python -m pytest -q $(ARGS)
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile $(ARGS)
 
 bench: setup
 	$(BIN)/python benchmarks/run.py $(ARGS)

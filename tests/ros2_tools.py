@@ -54,7 +54,9 @@ def missing_tf() -> str:
 class Graph:
     def __init__(self, folder: Path):
         self.folder = folder
-        self.env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(1, 100)),
+        # domains 51-100: the README's journeys, which may run beside this in another test
+        # process, take 1-50
+        self.env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(51, 100)),
                     "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                     "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp", "PYTHONUNBUFFERED": "1",
                     "ROS_LOG_DIR": str(folder / "log"), "CYCLONEDDS_URI": CYCLONE}

@@ -33,8 +33,9 @@ def journeys(readme: str) -> list[tuple[str, str, str]]:
 
 
 def run_journeys(folder: Path, with_make: bool) -> dict[str, str]:
-    # a ROS 2 graph of the test's own, on this machine only
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "ROS_DOMAIN_ID": str(os.getpid() % 100 + 1),
+    # a ROS 2 graph of the test's own, on this machine only (domains 1-50: the node tests'
+    # graphs, which may run beside this in another test process, take 51-100)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "ROS_DOMAIN_ID": str(os.getpid() % 50 + 1),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     for var in ("ROS_MASTER_URI", "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "VIRTUAL_ENV"):
         env.pop(var, None)

@@ -93,7 +93,7 @@ def session_rows(scn, names, repeat: int) -> list[tuple[str, float, str]]:
         bar = f">= {SESSION_BAR_X:.0f} {'ok' if x >= SESSION_BAR_X else 'UNDER'}"
         rows.append((f"session {name}: {world.time:.0f} s simulated, {people} people, "
                      f"{scans} scans; x real time (wall)", x, bar))
-        rows.append((f"  same, x real time (CPU)", float(np.median(cpu_speeds)), ""))
+        rows.append(("  same, x real time (CPU)", float(np.median(cpu_speeds)), ""))
     return rows
 
 

@@ -14,7 +14,7 @@ from gridmap import FREE, OCCUPIED, Pose2D, load_map, save_map
 from localization import MonteCarloLocalizer
 from localization.tracking import TrackingConfig, TrackingMonitor, TrackState
 from robotlogs import LogError, log_observations, read_bag
-from robotlogs.records import OdomRecord, ScanRecord, TransformRecord
+from robotlogs.records import OdomRecord, TransformRecord
 from robotlogs.rosbag import write_bag
 from mapupdate import main
 from robot.pipeline import RobotPipeline

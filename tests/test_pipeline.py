@@ -8,7 +8,6 @@ import math
 import pathlib
 
 import numpy as np
-import pytest
 
 from gridmap import FREE, OCCUPIED, Pose2D, PoseVerdict
 from localization import LocalizerConfig, MonteCarloLocalizer

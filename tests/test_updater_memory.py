@@ -125,7 +125,7 @@ def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
         hits = np.unique(rng.choice(pick[open_unknown[pick]], 6))
         seen = np.setdiff1d(np.unique(rng.choice(pick, 12)), hits)
         ws.hits_unknown, ws.changed = hits.astype(np.int64), seen.astype(np.int64)
-        steps.push_hits(tiles, ref, enclosed, hits.size, seen.size, cfg, marks, drawn, ws)
+        steps.push_hits(tiles, ref, enclosed, hits.size, seen.size, cfg, 0.05, marks, drawn, ws)
         want = reference_hit_push(dense, open_unknown, hits, seen, mask, cfg.threshold,
                                   cfg.unanimous_min)
         assert np.array_equal(tiles.dense().reshape(-1), dense)

@@ -455,7 +455,7 @@ def test_per_beam_distances_are_the_configuration_s_to_the_bit():
     r = np.r_[rng.uniform(0, 25, 500), np.nan, 0.2, 10.0, 7.3]
     ws = steps.Workspace()
     ws.for_beams(len(r), len(r), 10)
-    K.beam_distances(r, 0.05, ws.distances(cfg), ws.pairing, ws.tol, ws.skip, ws.reach,
+    K.beam_distances(r, 0.05, ws.settings(cfg, 0.05).dist, ws.pairing, ws.tol, ws.skip, ws.reach,
                      ws.free_reach)
     pairing, tol, skip = steps.beam_distances(r, 0.05, cfg)
     for got, want in ((ws.pairing, pairing), (ws.tol, tol), (ws.skip, skip),

@@ -219,9 +219,8 @@ class MapUpdater:
             self._enclosed, ws)
         self._push_and_decide(n_ch, n_un)
         if cfg.grow_into_unknown:
-            self._n_drawn += steps.push_hits(self._hits, ref, self._enclosed,
-                                             n_hits, n_ch, cfg, self._hit_marks, self._drawn,
-                                             ws)
+            self._n_drawn += steps.push_hits(self._hits, ref, self._enclosed, n_hits, n_ch,
+                                             cfg, res, self._hit_marks, self._drawn, ws)
         return n_ch, n_new, n_un
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
@@ -249,7 +248,7 @@ class MapUpdater:
         """The scan's flags listed in the workspace into the buffers, then the decision."""
         self._n_changed += steps.push_and_decide(
             self._hist.reshape(-1), self._seen.reshape(-1), self._ref.reshape(-1),
-            self._decided, n_changed, n_unchanged, self._ref.shape[1], self.config,
+            self._decided, n_changed, n_unchanged, self._ref.shape[1], self.config, self._res,
             self._ch_marks, self._un_marks, self._ws)
 
     def _placed_pose(self, sensor_pose: Pose2D, pose_check):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -89,7 +89,6 @@ class Workspace:
         self._own = None
         self._layout = self._layout_cfg = None
         self._settings = self._settings_cfg = None
-        self._rules = self._rules_cfg = None
         self.missing_tiles = np.zeros(0, np.int64)
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
@@ -177,25 +176,9 @@ class Workspace:
             self._settings, self._settings_cfg = got, cfg
         return got
 
-    def buffer_rules(self, cfg: UpdaterConfig) -> tuple[int, int, int, int]:
-        """(``buffer_mask``, ``count_shift``, ``settled_bound``, ``support_mode``) of the
-        configuration (kept while it is the same object)."""
-        if self._rules_cfg is not cfg:
-            self._rules_cfg = cfg
-            self._rules = (buffer_mask(cfg), count_shift(cfg), settled_bound(cfg),
-                           support_mode(cfg))
-        return self._rules
-
-    def distances(self, cfg: UpdaterConfig) -> np.ndarray:
-        """The parameters of the range-dependent distances, for ``kernels().beam_distances``
-        (kept while the configuration is the same object)."""
-        if getattr(self, "_dist_cfg", None) is not cfg:
-            self._dist_cfg = cfg
-            self.dist = np.array([getattr(cfg, name) for name in kernels().DISTANCES], np.float64)
-        return self.dist
-
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
+        held = list(vars(self).values()) + ([self._settings.dist] if self._settings else [])
+        return sum(a.nbytes for a in held if isinstance(a, np.ndarray))
 
 
 @dataclass(frozen=True)
@@ -243,13 +226,21 @@ class Settings:
     unknown_guard: float  # ``unknown_guard``
     short: float          # [m] the walks into unknown space stop this far short of the hit
     gaps: int             # fill_gaps' clearance [cells]; 0: off
+    mask: int             # the buffers' rules: ``buffer_mask``, ``count_shift``,
+    shift: int            # ``settled_bound`` and ``support_mode``
+    full: int
+    support: int
+    # the range-dependent distances' parameters, for ``kernels().beam_distances``
+    dist: np.ndarray = field(compare=False)
 
     @classmethod
     def of(cls, cfg: UpdaterConfig, res: float) -> Settings:
         radius = cfg.seen_surface_radius / res
         gaps = max(1, int(round(cfg.fill_gaps_clearance / res))) if cfg.fill_gaps else 0
+        dist = np.array([getattr(cfg, name) for name in kernels().DISTANCES], np.float64)
         return cls(res, radius, 2 * int(math.ceil(radius)) + 1, unknown_guard(cfg, res),
-                   max(cfg.seen_surface_radius, res), gaps)
+                   max(cfg.seen_surface_radius, res), gaps, buffer_mask(cfg), count_shift(cfg),
+                   settled_bound(cfg), support_mode(cfg), dist)
 
 
 def to_grid(sensor_pose, origin, res) -> np.ndarray:
@@ -295,7 +286,7 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     n_valid, bound = k.prepare_beams(
         ranges=scan.ranges, r_lo=float(scan.range_min), r_hi=float(lay.r_hi), sensor=sensor,
         angle_min=scan.angle_min, step=lay.step, increment=scan.angle_increment, ratio=ratio,
-        res=res, dist=ws.distances(cfg), out_r=ws.r, out_valid=ws.valid,
+        res=res, dist=ws.settings(cfg, res).dist, out_r=ws.r, out_valid=ws.valid,
         out_virtual=ws.virtual, out_measured=ws.measured, out_hits=ws.hits,
         out_pairing=ws.pairing, out_tol=ws.tol, out_skip=ws.skip, out_reach=ws.reach,
         out_free_reach=ws.free_reach)
@@ -527,8 +518,8 @@ def release_unknown_hits(ch_marks: np.ndarray, un_marks: np.ndarray, n_hits: int
 
 
 def push_hits(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, n_hits: int,
-              n_changed: int, cfg: UpdaterConfig, hit_marks: np.ndarray, drawn: np.ndarray,
-              ws: Workspace) -> int:
+              n_changed: int, cfg: UpdaterConfig, res: float, hit_marks: np.ndarray,
+              drawn: np.ndarray, ws: Workspace) -> int:
     """The hit buffers of open unknown cells, N_b flags as the change buffers: 1 for a scan
     that hit the cell, 0 for one that saw through it. A cell hit in T of its last N_b
     observations (or, with ``unanimous_min``, hit by every scan that observed it, at least that
@@ -541,7 +532,8 @@ def push_hits(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, n_hits: in
         tiles.make(missing[:n_missing])
     return int(kernels().push_hits(tiles.directory, tiles.pool, ref.shape[1], ref.reshape(-1),
                                    enclosed, hit_cells=hit_cells,
-                                   changed=ws.changed[:n_changed], mask=ws.buffer_rules(cfg)[0],
+                                   changed=ws.changed[:n_changed],
+                                   mask=ws.settings(cfg, res).mask,
                                    threshold=cfg.threshold, few=cfg.unanimous_min,
                                    hit_marks=hit_marks, drawn=drawn))
 
@@ -679,19 +671,19 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
 
 def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                     decided: np.ndarray, n_changed: int, n_unchanged: int, width: int,
-                    cfg: UpdaterConfig, ch_marks: np.ndarray, un_marks: np.ndarray,
+                    cfg: UpdaterConfig, res: float, ch_marks: np.ndarray, un_marks: np.ndarray,
                     ws: Workspace) -> int:
     """``push_flags`` then ``decide`` in one kernel call (the changed-flag marks, all clear
     after the push, serve the decision as its stamps). The unchanged-flag marks stay set on
     the free cells whose buffers are settled (``settled_marks``). Returns the change of the
     number of changed cells."""
     ws.for_moved(n_changed + n_unchanged)
-    mask, shift, full, support = ws.buffer_rules(cfg)
+    st = ws.settings(cfg, res)
     return int(kernels().push_and_decide(
         hist_flat, seen_flat, ref_flat, decided, changed=ws.changed[:n_changed],
-        unchanged=ws.unchanged[:n_unchanged], mask=mask, threshold=cfg.threshold,
-        few=cfg.unanimous_min, support=support, width=width, ch_marks=ch_marks,
-        un_marks=un_marks, moved=ws.moved, shift=shift, full=full))
+        unchanged=ws.unchanged[:n_unchanged], mask=st.mask, threshold=cfg.threshold,
+        few=cfg.unanimous_min, support=st.support, width=width, ch_marks=ch_marks,
+        un_marks=un_marks, moved=ws.moved, shift=st.shift, full=st.full))
 
 
 def decide_all(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray, width: int,

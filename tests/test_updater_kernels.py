@@ -788,9 +788,11 @@ def test_push_flags_keeps_the_marks_of_the_settled_free_cells(packed):
 @pytest.mark.parametrize("support", [False, True, 2])
 @pytest.mark.parametrize("few", [0, 3])
 @pytest.mark.parametrize("packed", [False, True])
-def test_decide_incremental_equals_full_map(support, few, packed):
+@pytest.mark.parametrize("skip", [False, True])
+def test_decide_incremental_equals_full_map(support, few, packed, skip):
     """Both layouts of the flag counts: an array of their own, and the bits above the flags
-    (``shift``)."""
+    (``shift``); with ``skip``, the push leaves out the cells whose flag agrees with their
+    decided bit (some cells get a changed and an unchanged flag in the same scan)."""
     rng = np.random.default_rng(7 + support + 10 * few)
     data = random_map(rng, h=30, w=30, p_occ=0.3, p_unk=0.1)
     flat = data.reshape(-1)
@@ -800,7 +802,7 @@ def test_decide_incremental_equals_full_map(support, few, packed):
     decided = np.zeros((data.size + 7) // 8, np.uint8)
     marks = np.zeros_like(decided), np.zeros_like(decided)
     moved = np.zeros(2000, np.int32)
-    count = peak = 0
+    count = peak = left_out = 0
     centres = rng.integers(0, 26, (3, 2))
     for scan in range(40):
         # flags in a few blobs, so that neighbours reach the threshold together
@@ -810,8 +812,15 @@ def test_decide_incremental_equals_full_map(support, few, packed):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
+        before = hist.copy(), seen.copy()
         n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved,
-                         shift=shift)
+                         shift=shift, decided=decided if skip else None)
+        if skip:    # the same buffers as without the skip, and fewer cells to decide
+            plain = before[0].copy(), before[1].copy()
+            n_all = K.push_flags(*plain, flat, ch, un, 0x3FF, 7, few, np.zeros_like(decided),
+                                 np.zeros_like(decided), np.zeros(2000, np.int32), shift=shift)
+            assert (plain[0] == hist).all() and (plain[1] == seen).all() and n <= n_all
+            left_out += n_all - n
         count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support,
                           shift=shift)
         counts = hist >> 10 if packed else seen
@@ -821,6 +830,7 @@ def test_decide_incremental_equals_full_map(support, few, packed):
         assert (got == expect).all() and count == expect.sum()
         peak = max(peak, count)
     assert peak > count > 0           # cells changed, and some changed back
+    assert left_out > 0 or not skip
     full = np.zeros_like(decided)
     assert K.decide_all(hist, seen, flat, full, 30, 0x3FF, 7, few, support, shift=shift) == count
     assert (full == decided).all()

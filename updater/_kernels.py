@@ -1194,7 +1194,7 @@ def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshol
     """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
     stamps), in one call. Returns the change of the number of changed cells."""
     n_moved = push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks,
-                         un_marks, moved, shift, full)
+                         un_marks, moved, shift, full, decided)
     return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
                   support, ch_marks, shift)
 
@@ -1202,7 +1202,7 @@ def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshol
 # --- buffers and decision ---------------------------------------------------------------------
 @njit(cache=True)
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
-               out_moved, shift=0, full=NEVER_SETTLED):
+               out_moved, shift=0, full=NEVER_SETTLED, decided=None):
     """Shift the scan's flags into the buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & mask`` in the buffer's low bits, count each flag
     (``flag_count``: in ``seen``, or with ``shift`` > 0 above the flags; an empty ``seen``
@@ -1212,8 +1212,13 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
     as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
     changed too). With ``full`` (``settled``'s bound), the unchanged-flag marks are kept
     between scans on the free cells whose buffers are settled, and only on those
-    (``settled_marks``): a free walk makes no flag that would change nothing. Returns the
-    count written."""
+    (``settled_marks``): a free walk makes no flag that would change nothing. With
+    ``decided`` (the decided bits, as the rule left them), a cell whose flag agrees with its
+    decided bit and whose count did not cross the threshold is not written: a changed flag
+    does not lower n_c and keeps a unanimous record unanimous (or lifts it to T), an
+    unchanged one does not raise n_c and breaks unanimity, so the rule cannot turn such a
+    cell; only a crossing (written as one) changes its neighbours'. Returns the count
+    written."""
     n = 0
     n_changed = changed.shape[0]
     keep = full != NEVER_SETTLED
@@ -1256,6 +1261,8 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
         if crossed:
             out_moved[n] = -1 - idx
             n += 1
+        elif decided is not None and ((decided[idx >> 3] >> (idx & 7)) & 1) == flag:
+            continue            # the decision cannot turn (see above)
         elif p_old != p_new or (few > 0 and flag_count(hist, seen, idx, shift) <= threshold):
             out_moved[n] = idx
             n += 1

@@ -812,17 +812,22 @@ def test_decide_incremental_equals_full_map(support, few, packed, skip):
         p = 0.85 if scan < 25 else 0.3
         ch = cells[rng.random(cells.size) < p]
         un = cells[rng.random(cells.size) < 0.3]
-        before = hist.copy(), seen.copy()
-        n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, marks[0], marks[1], moved,
-                         shift=shift, decided=decided if skip else None)
-        if skip:    # the same buffers as without the skip, and fewer cells to decide
-            plain = before[0].copy(), before[1].copy()
-            n_all = K.push_flags(*plain, flat, ch, un, 0x3FF, 7, few, np.zeros_like(decided),
-                                 np.zeros_like(decided), np.zeros(2000, np.int32), shift=shift)
-            assert (plain[0] == hist).all() and (plain[1] == seen).all() and n <= n_all
-            left_out += n_all - n
-        count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few, support,
-                          shift=shift)
+        if skip:
+            # the cells whose flags agree with their decided bits left out of the decision
+            # (counted on copies), in the kernel that pushes and decides
+            kept = [a.copy() for a in (hist, seen, decided)]
+            n_all = K.push_flags(*kept[:2], flat, ch, un, 0x3FF, 7, few, *marks, moved,
+                                 shift=shift)
+            left_out += n_all - K.push_flags(hist.copy(), seen.copy(), flat, ch, un, 0x3FF, 7,
+                                             few, *marks, moved, shift=shift, decided=kept[2])
+            count += K.push_and_decide(hist, seen, flat, decided, ch, un, 0x3FF, 7, few,
+                                       support, 30, *marks, moved, shift)
+            assert (kept[0] == hist).all() and (kept[1] == seen).all()   # the same buffers
+        else:
+            n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, *marks, moved,
+                             shift=shift)
+            count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few,
+                              support, shift=shift)
         counts = hist >> 10 if packed else seen
         expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support,
                                 counts.reshape(30, 30).astype(int), few)

@@ -1193,10 +1193,13 @@ def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshol
                     support, width, ch_marks, un_marks, moved, shift=0, full=NEVER_SETTLED):
     """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
     stamps), in one call. Returns the change of the number of changed cells."""
-    n_moved = push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks,
-                         un_marks, moved, shift, full, decided)
+    # the changed flags' entries first, so that the decision knows which way each crossed
+    n_up = push_flags(hist, seen, ref, changed, unchanged[:0], mask, threshold, few, ch_marks,
+                      un_marks, moved, shift, full, decided)
+    n_moved = n_up + push_flags(hist, seen, ref, changed[:0], unchanged, mask, threshold, few,
+                                ch_marks, un_marks, moved[n_up:], shift, full, decided)
     return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
-                  support, ch_marks, shift)
+                  support, ch_marks, shift, n_up)
 
 
 # --- buffers and decision ---------------------------------------------------------------------
@@ -1354,14 +1357,19 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
 
 @njit(cache=True)
 def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support, stamp=None,
-           shift=0):
+           shift=0, n_up=-1):
     """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
     crossed the threshold: no other cell's inputs changed. The rule reads only the buffers, so
     each cell is decided once however many entries name it: ``stamp`` (bits per cell, all
     clear, and cleared again before returning; a scratch plane when not given) tells which
     are done. The rule is ``decide_cell``'s, written out in the loop: a call taking the
-    arrays, inlined or not, counts a reference to each of them per cell. Returns the change
-    of the number of changed cells."""
+    arrays, inlined or not, counts a reference to each of them per cell. ``n_up`` (-1: not
+    known): the entries before it come from changed flags, the others from unchanged ones. A
+    changed flag only raises n_c and only ends a surface's confirmation (``confirmed``), an
+    unchanged one the opposite, and the rule grows with its neighbours' n_c and shrinks with
+    their confirmation: so around a crossing from a changed flag only the cells not yet
+    changed can turn, and around one from an unchanged flag only the changed ones; the
+    others are left. Returns the change of the number of changed cells."""
     if stamp is None:
         stamp = np.zeros((ref.shape[0] + 7) // 8, np.uint8)
     height = ref.shape[0] // width
@@ -1370,9 +1378,11 @@ def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support
     for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
         lo, hi = neighbourhood(idx, width, ref.shape[0], (support or few > 0) and moved[k] < 0)
+        # the decided bit that cannot turn around this entry (2: none)
+        kept = 2 if n_up < 0 or moved[k] >= 0 else (1 if k < n_up else 0)
         for row_start in range(lo, hi + 1, width):
             for i in range(row_start, row_start + (hi - lo) % width + 1):
-                if stamp[i >> 3] & (1 << (i & 7)):
+                if stamp[i >> 3] & (1 << (i & 7)) or ((decided[i >> 3] >> (i & 7)) & 1) == kept:
                     continue
                 stamp[i >> 3] |= np.uint8(1 << (i & 7))
                 n = popcount16(hist[i] & mask)

@@ -307,18 +307,28 @@ def classify_scan(ref, clear, sensor, virtual, max_len, hits, valid, pairing, ha
     return raw, kept
 
 
-@njit(cache=True)
-def ends_in_unknown(ref, expected, directions, found, ratio, n, out):
-    """Per measured beam i < n (its virtual beam i * ratio): its expected ray stops at an
-    unknown cell of ``ref`` (or leaves the map, whose outside is unknown). The expected point
-    is where the ray enters that cell: a hair (1e-4 grid units) further along lies inside."""
+@njit(cache=True, inline="always")
+def ends_in_unknown(ref, expected, directions, i):
+    """Whether the expected ray of row ``i`` stops at an unknown cell of ``ref`` (or leaves the
+    map, whose outside is unknown). The expected point is where the ray enters that cell: a
+    hair (1e-4 grid units) further along lies inside."""
     height, width = ref.shape
-    for i in range(n):
-        j = i * ratio
-        col = int(np.floor(expected[j, 0] + 1e-4 * directions[j, 0]))
-        row = int(np.floor(expected[j, 1] + 1e-4 * directions[j, 1]))
-        on_map = 0 <= col < width and 0 <= row < height
-        out[i] = found[j] and (ref[row, col] == UNKNOWN if on_map else True)
+    col = int(np.floor(expected[i, 0] + 1e-4 * directions[i, 0]))
+    row = int(np.floor(expected[i, 1] + 1e-4 * directions[i, 1]))
+    return not (0 <= col < width and 0 <= row < height) or ref[row, col] == UNKNOWN
+
+
+@njit(cache=True)
+def known_changes(ref, expected, directions, found, ranges, change):
+    """The lost check's counts, a row per measured beam: (beams with a range whose expected
+    ray ends in known space, those of them that are changes)."""
+    n_known = n_changes = 0
+    for i in range(ranges.shape[0]):
+        if np.isnan(ranges[i]) or (found[i] and ends_in_unknown(ref, expected, directions, i)):
+            continue
+        n_known += 1
+        n_changes += change[i] != 0
+    return n_known, n_changes
 
 
 # --- walks along beams ------------------------------------------------------------------------
@@ -842,17 +852,12 @@ def flag_unknown_seen_through(ref, enclosed, clear, sensor, hits, ranges, expect
 @njit(cache=True)
 def unknown_walks(ref, ranges, expected, directions, found, short, into, reach):
     """Which beams ``flag_unknown_seen_through`` walks (``into``) and how far (``reach``)."""
-    height, width = ref.shape
     for i in range(ranges.shape[0]):
         r = ranges[i]
         into[i] = False
         reach[i] = 0.0
-        if not (r > short) or not found[i]:
+        if not (r > short) or not found[i] or not ends_in_unknown(ref, expected, directions, i):
             continue    # a NaN range (an invalid beam) is not above short either
-        col = int(np.floor(expected[i, 0] + 1e-4 * directions[i, 0]))
-        row = int(np.floor(expected[i, 1] + 1e-4 * directions[i, 1]))
-        if 0 <= col < width and 0 <= row < height and ref[row, col] != UNKNOWN:
-            continue
         into[i] = True
         reach[i] = 1.0 - short / r
 

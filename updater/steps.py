@@ -305,18 +305,6 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
                  clear, abs(scan.angle_increment), lay.even)
 
 
-def ends_in_unknown(ref: np.ndarray, expected: np.ndarray, directions: np.ndarray,
-                    found: np.ndarray) -> np.ndarray:
-    """Per beam: its expected ray stops at an unknown cell of M (or leaves the map, whose
-    outside is unknown). The expected point is where the ray enters that cell: a hair further
-    along the ray lies inside it."""
-    out = np.zeros(len(found), np.bool_)
-    kernels().ends_in_unknown(ref, np.ascontiguousarray(expected),
-                              np.ascontiguousarray(directions), np.ascontiguousarray(found),
-                              ratio=1, n=len(found), out=out)
-    return out
-
-
 def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
     """More than ``lost_fraction`` of the valid beams disagree with the map (counted before the
     run filter): the pose is probably wrong, so the scan is dropped. A beam that is a change
@@ -326,10 +314,9 @@ def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
     rule: that is asked first, and costs nothing.)"""
     if not (beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid):
         return False
-    known = ~ends_in_unknown(ref, beams.own_expected, beams.own_direction, beams.own_found)
-    known &= ~np.isnan(beams.ranges)
-    n_known = int(np.count_nonzero(known))
-    return n_known > 0 and np.count_nonzero(known & beams.change) > cfg.lost_fraction * n_known
+    n_known, n_changes = kernels().known_changes(ref, beams.own_expected, beams.own_direction,
+                                                 beams.own_found, beams.ranges, beams.change)
+    return n_known > 0 and n_changes > cfg.lost_fraction * n_known
 
 
 # --- not in the paper: the seen-surface guard -------------------------------------------------

@@ -746,7 +746,10 @@ def test_push_flags_against_reference():
             log.append(-1 - idx if (p0 >= 7) != (p1 >= 7) else idx)
     assert hist.tolist() == expect.tolist()
     assert moved[:n].tolist() == log
-    assert not ch_marks[changed >> 3].any() and not un_marks[unchanged >> 3].any()
+    # the flagged cells' marks cleared (the changed flags' bit by bit, the others kept)
+    ch_bits = np.unpackbits(ch_marks, bitorder="little")[:500]
+    assert not ch_bits[changed].any() and ch_bits.sum() == 500 - changed.size
+    assert not un_marks[unchanged >> 3].any()
 
 
 @pytest.mark.parametrize("packed", [False, True])
@@ -816,13 +819,17 @@ def test_decide_incremental_equals_full_map(support, few, packed, skip):
             # the cells whose flags agree with their decided bits left out of the decision
             # (counted on copies), in the kernel that pushes and decides
             kept = [a.copy() for a in (hist, seen, decided)]
-            n_all = K.push_flags(*kept[:2], flat, ch, un, 0x3FF, 7, few, *marks, moved,
-                                 shift=shift)
+            n_all = K.push_flags(*kept[:2], flat, ch, un, 0x3FF, 7, few,
+                                 *[m.copy() for m in marks], moved, shift=shift)
             left_out += n_all - K.push_flags(hist.copy(), seen.copy(), flat, ch, un, 0x3FF, 7,
-                                             few, *marks, moved, shift=shift, decided=kept[2])
+                                             few, *[m.copy() for m in marks], moved,
+                                             shift=shift, decided=kept[2])
             count += K.push_and_decide(hist, seen, flat, decided, ch, un, 0x3FF, 7, few,
                                        support, 30, *marks, moved, shift)
             assert (kept[0] == hist).all() and (kept[1] == seen).all()   # the same buffers
+            # the changed-flag marks left on the cells full of changes, and on those alone
+            full = (hist & 0x3FF) == 0x3FF
+            assert (np.unpackbits(marks[0], bitorder="little")[:900] == full).all()
         else:
             n = K.push_flags(hist, seen, flat, ch, un, 0x3FF, 7, few, *marks, moved,
                              shift=shift)

@@ -501,40 +501,55 @@ def test_the_updater_gives_what_it_gave_before_to_the_bit(seed, robot):
                             gate_min_rotation_deg=20.0, fill_gaps=seed == 2,
                             virtual_to_measured_ratio=1 + seed % 2)
     after, before = MapUpdater(ref, cfg), BeforeMapUpdater(ref, cfg)
+    mask = np.uint16(steps.buffer_mask(cfg))
+    skipped = 0
     for scan, noisy, true in scans:
         quiet = settled_free_cells(ref.data, before._hist,
                                    before._seen if before._seen.size else None, cfg)
+        full = (before._hist.reshape(-1) & mask) == mask
         a = after.process(scan, noisy, odometry=true)
         b = before.process(scan, noisy, odometry=true)
-        # the same report, but for the unchanged flags that would have changed nothing: the
-        # code before flagged the free cells with settled buffers too, where no changed flag
-        # came first
-        quiet[before._ws.changed[:b.changed_flags]] = False
+        # the same report, but for the flags that would have changed nothing: the code before
+        # flagged the free cells with settled buffers too, where no changed flag came first,
+        # and made changed flags in buffers full of them (on the free cells of M: the
+        # new-obstacle and fill_gaps flags; the walks flag the others)
+        changed = before._ws.changed[:b.changed_flags]
+        quiet[changed] = False
         passed = int(np.count_nonzero(quiet[before._ws.unchanged[:b.unchanged_flags]]))
         assert a.unchanged_flags == b.unchanged_flags - passed
-        assert {**a.summary(), "unchanged_flags": 0} == {**b.summary(), "unchanged_flags": 0}
+        news = changed[ref.data.reshape(-1)[changed] == FREE]
+        assert news.size == b.new_obstacle_flags
+        assert a.changed_flags == b.changed_flags - int(np.count_nonzero(full[changed]))
+        assert a.new_obstacle_flags == b.new_obstacle_flags - int(np.count_nonzero(full[news]))
+        skipped += b.changed_flags - a.changed_flags
+        assert {**a.summary(), "unchanged_flags": 0, "changed_flags": 0,
+                "new_obstacle_flags": 0} == \
+            {**b.summary(), "unchanged_flags": 0, "changed_flags": 0, "new_obstacle_flags": 0}
         assert (a.verdicts is None and b.verdicts is None) or \
             np.array_equal(a.verdicts, b.verdicts)
+    assert skipped > 0
     assert np.array_equal(after.updated_map().data, before.updated_map().data)
-    mask = np.uint16(steps.buffer_mask(cfg))
     assert np.array_equal(after._hist & mask, before._hist)
     assert np.array_equal(after._hits.dense(), before._hitbuf)
     # the flag counts, kept above the flags now, are alike up to T, past which no rule tells a
-    # free cell's apart: a settled cell's count stops there, as no walk flags it
+    # free cell's apart (a settled cell's count stops there, as no walk flags it), and every
+    # cell's up to N_b, past which no rule tells any apart (a count stops where changed flags
+    # fill the buffer)
     if before._seen.size:
         counts, counts_before = after._flag_counts(), before._seen.reshape(-1)
-        occupied = ref.data.reshape(-1) != FREE
-        top = 0xFFFF >> steps.count_shift(cfg)      # where the field saturates
-        assert np.array_equal(counts[occupied], np.minimum(counts_before[occupied], top))
-        bound = cfg.threshold
-        assert np.array_equal(np.minimum(counts, bound), np.minimum(counts_before, bound))
+        for bound in (cfg.threshold, cfg.buffer_size):
+            cells = slice(None) if bound == cfg.threshold else ref.data.reshape(-1) != FREE
+            assert np.array_equal(np.minimum(counts, bound)[cells],
+                                  np.minimum(counts_before, bound)[cells])
         assert np.all(counts <= counts_before) and np.any(counts < counts_before)
     else:
         assert after._flag_counts() is None and np.array_equal(after._hist, before._hist)
     assert after.stats == before.stats and after.n_changed == before.n_changed > 0
-    # between scans the changed-flag marks are clear, the unchanged-flag marks set on the
-    # settled free cells alone
-    assert not after._ch_marks.any()
+    # between scans the changed-flag marks are set on the cells whose buffers are full of
+    # changes alone, the unchanged-flag marks on the settled free cells alone
+    full = (after._hist.reshape(-1) & mask) == mask
+    assert full.any() and np.array_equal(
+        np.unpackbits(after._ch_marks, bitorder="little")[:ref.data.size], full)
     quiet = settled_free_cells(ref.data, after._hist & mask, after._flag_counts(), cfg)
     assert np.array_equal(np.unpackbits(after._un_marks, bitorder="little")[:ref.data.size],
                           quiet)

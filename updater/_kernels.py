@@ -1196,54 +1196,64 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
 @njit(cache=True)
 def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
                     support, width, ch_marks, un_marks, moved, shift=0, full=NEVER_SETTLED):
-    """``push_flags`` then ``decide`` (the changed-flag marks, clear after the push, as its
-    stamps), in one call. Returns the change of the number of changed cells."""
+    """``push_flags`` then ``decide`` in one call, the changed-flag marks kept between scans on
+    the cells whose buffers are full of changes (``push_flags``' ``settle``) and serving the
+    decision as its stamps: those cells stay changed whatever their neighbours do, so the
+    decision may take them as done. Returns the change of the number of changed cells."""
     # the changed flags' entries first, so that the decision knows which way each crossed
     n_up = push_flags(hist, seen, ref, changed, unchanged[:0], mask, threshold, few, ch_marks,
-                      un_marks, moved, shift, full, decided)
+                      un_marks, moved, shift, full, decided, True)
     n_moved = n_up + push_flags(hist, seen, ref, changed[:0], unchanged, mask, threshold, few,
-                                ch_marks, un_marks, moved[n_up:], shift, full, decided)
+                                ch_marks, un_marks, moved[n_up:], shift, full, decided, True)
     return decide(hist, seen, ref, decided, moved[:n_moved], width, mask, threshold, few,
-                  support, ch_marks, shift, n_up)
+                  support, ch_marks, shift, n_up, True)
 
 
 # --- buffers and decision ---------------------------------------------------------------------
+# Shortcuts of the push and the decision, each leaving the buffers and the decided bits as
+# they were without it (docs/algorithm.md):
+# - ``decided``: a cell whose flag agrees with its decided bit, and whose count did not cross
+#   the threshold, is not re-decided. A changed flag does not lower n_c and keeps a unanimous
+#   record unanimous (or lifts it to T); an unchanged one does not raise n_c and breaks
+#   unanimity: the rule cannot turn such a cell. Only a crossing changes its neighbours'.
+# - ``n_up``: around a crossing, a changed flag only raises n_c and ends a surface's
+#   confirmation (``confirmed``), an unchanged one the opposite, and the rule grows with the
+#   neighbours' n_c and shrinks with their confirmation: so around a changed flag's crossing
+#   only the cells not yet changed can turn, around an unchanged flag's only the changed ones.
+# - ``settle``: the changed-flag marks stay set between scans on the cells whose buffers are
+#   full of changes (set when a changed flag fills one without a crossing, cleared when an
+#   unchanged flag enters one). A walk makes no changed flag there; it would change nothing
+#   but a count past N_b, which no rule reads (they read counts against T <= N_b, or
+#   min(count, N_b)). Such a cell is changed whatever its neighbours do, so the decision takes
+#   these marks as its stamps (``keep_full``: done) and leaves them.
 @njit(cache=True)
 def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_marks, un_marks,
-               out_moved, shift=0, full=NEVER_SETTLED, decided=None):
+               out_moved, shift=0, full=NEVER_SETTLED, decided=None, settle=False):
     """Shift the scan's flags into the buffers, changed flags first:
     ``hist = ((hist << 1) | flag) & mask`` in the buffer's low bits, count each flag
     (``flag_count``: in ``seen``, or with ``shift`` > 0 above the flags; an empty ``seen``
-    and ``shift`` 0 count nothing, and then ``few`` must be 0) and
-    clear the scan's marks. ``out_moved`` gets each cell whose count n_c changed (or, with the
-    rule for few observations, ``few`` > 0, whose observations are still below the threshold),
-    as ``idx``, or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support
-    changed too). With ``full`` (``settled``'s bound), the unchanged-flag marks are kept
-    between scans on the free cells whose buffers are settled, and only on those
-    (``settled_marks``): a free walk makes no flag that would change nothing. With
-    ``decided`` (the decided bits, as the rule left them), a cell whose flag agrees with its
-    decided bit and whose count did not cross the threshold is not written: a changed flag
-    does not lower n_c and keeps a unanimous record unanimous (or lifts it to T), an
-    unchanged one does not raise n_c and breaks unanimity, so the rule cannot turn such a
-    cell; only a crossing (written as one) changes its neighbours'. Returns the count
-    written."""
+    and ``shift`` 0 count nothing, and then ``few`` must be 0) and clear the scan's marks.
+    ``out_moved`` gets each cell whose count n_c changed (or, with the rule for few
+    observations, ``few`` > 0, whose observations are still below the threshold), as ``idx``,
+    or as ``-1 - idx`` when n_c crossed the threshold (its neighbours' support changed too).
+    With ``full`` (``settled``'s bound), the unchanged-flag marks are kept between scans on
+    the free cells whose buffers are settled, and only on those (``settled_marks``): a free
+    walk makes no flag that would change nothing. ``decided``, ``settle``: the shortcuts
+    above. Returns the count written."""
     n = 0
     n_changed = changed.shape[0]
     keep = full != NEVER_SETTLED
-    # the count's lowest bit in the buffer (0: the array of its own); written out in the loop,
-    # as a call it kept the loop several times slower
+    # the count's lowest bit (0: an array of its own), written out: a call slowed the loop
     unit = np.int64(1) << shift if shift > 0 else 0
     counting = seen.shape[0] > 0
     for k in range(n_changed + unchanged.shape[0]):
-        if k < n_changed:
-            idx, flag = changed[k], 1
-            ch_marks[idx >> 3] = 0
-        else:
-            idx, flag = unchanged[k - n_changed], 0
-            if not keep:
-                un_marks[idx >> 3] = 0
+        idx, flag = (changed[k], 1) if k < n_changed else (unchanged[k - n_changed], 0)
+        if flag == 0 and not keep:
+            un_marks[idx >> 3] = 0
         h = np.int64(hist[idx])
         old = h & mask
+        if flag == 1 or (settle and old == mask):   # the bit alone: the others may be settled
+            set_bit(ch_marks, idx, False)
         free = ref[idx] == FREE
         watched = few > 0 and ref[idx] == OCCUPIED
         was = watched and confirmed(hist, seen, ref, idx, mask, shift)
@@ -1266,6 +1276,8 @@ def push_flags(hist, seen, ref, changed, unchanged, mask, threshold, few, ch_mar
         crossed = (p_old >= threshold) != (p_new >= threshold)
         if watched and was != confirmed(hist, seen, ref, idx, mask, shift):
             crossed = True      # its neighbours' unanimous rule changed too
+        if settle and new == mask and flag == 1 and not crossed:
+            set_bit(ch_marks, idx, True)
         if crossed:
             out_moved[n] = -1 - idx
             n += 1
@@ -1362,19 +1374,16 @@ def decide_cell(hist, seen, ref, decided, idx, width, mask, threshold, few, supp
 
 @njit(cache=True)
 def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support, stamp=None,
-           shift=0, n_up=-1):
+           shift=0, n_up=-1, keep_full=False):
     """Re-decide every cell whose own inputs moved, and the 8-neighbours of those whose count
     crossed the threshold: no other cell's inputs changed. The rule reads only the buffers, so
     each cell is decided once however many entries name it: ``stamp`` (bits per cell, all
     clear, and cleared again before returning; a scratch plane when not given) tells which
     are done. The rule is ``decide_cell``'s, written out in the loop: a call taking the
     arrays, inlined or not, counts a reference to each of them per cell. ``n_up`` (-1: not
-    known): the entries before it come from changed flags, the others from unchanged ones. A
-    changed flag only raises n_c and only ends a surface's confirmation (``confirmed``), an
-    unchanged one the opposite, and the rule grows with its neighbours' n_c and shrinks with
-    their confirmation: so around a crossing from a changed flag only the cells not yet
-    changed can turn, and around one from an unchanged flag only the changed ones; the
-    others are left. Returns the change of the number of changed cells."""
+    known): the entries before it come from changed flags, the others from unchanged ones;
+    ``keep_full``: ``stamp`` holds the changed-flag marks of ``settle`` (the shortcuts above
+    ``push_flags``). Returns the change of the number of changed cells."""
     if stamp is None:
         stamp = np.zeros((ref.shape[0] + 7) // 8, np.uint8)
     height = ref.shape[0] // width
@@ -1416,19 +1425,27 @@ def decide(hist, seen, ref, decided, moved, width, mask, threshold, few, support
                 if changed != (((decided[i >> 3] >> (i & 7)) & 1) == 1):
                     decided[i >> 3] ^= np.uint8(1 << (i & 7))
                     delta += 1 if changed else -1
-    clear_neighbourhoods(moved, width, ref.shape[0], support or few > 0, stamp)
+    clear_neighbourhoods(moved, width, ref.shape[0], support or few > 0, stamp,
+                         hist if keep_full else None, mask)
     return delta
 
 
 @njit(cache=True)
-def clear_neighbourhoods(moved, width, size, spread, stamp):
-    """Clear the ``stamp`` bytes of the cells ``decide`` stamped for ``moved``."""
+def clear_neighbourhoods(moved, width, size, spread, stamp, hist=None, mask=0):
+    """Clear the ``stamp`` bytes of the cells ``decide`` stamped for ``moved``; with ``hist``,
+    the bits alone, set on the cells whose buffers (``mask``) are full of changes, cleared on
+    the others (the changed-flag marks as ``push_flags``' ``settle`` keeps them)."""
     for k in range(moved.shape[0]):
         idx = moved[k] if moved[k] >= 0 else -1 - moved[k]
         lo, hi = neighbourhood(idx, width, size, spread and moved[k] < 0)
         for row_start in range(lo, hi + 1, width):
-            for j in (row_start, row_start + (hi - lo) % width):
-                stamp[j >> 3] = 0
+            row_end = row_start + (hi - lo) % width
+            if hist is None:
+                stamp[row_start >> 3] = 0
+                stamp[row_end >> 3] = 0
+                continue
+            for i in range(row_start, row_end + 1):
+                set_bit(stamp, i, (hist[i] & mask) == mask)
 
 
 @njit(cache=True)

@@ -8,12 +8,14 @@ array              bytes per cell  what
 reference          1               M, int8 (0 free, 100 occupied, -1 unknown), never changed
 buffers            2               uint16 shift registers of the last N_b flags
 flag counts        0 or 1          flags a cell got (saturating; a settled free cell's stays
-                                   at T or past it): above the flags in the buffer (N_b <= 12),
-                                   else a uint8 (at 255)
+                                   at T or past it, a full buffer's of changes at N_b or past
+                                   it): above the flags in the buffer (N_b <= 12), else a
+                                   uint8 (at 255)
 decided            1/8             bit per cell: the decision rule says "changed"
 enclosed           1/8             bit per cell: unknown cell of an enclosed region of M
 scan marks         2/8             bits per cell, set and cleared within one scan (the
-                                   unchanged-flag marks stay set on settled free cells)
+                                   unchanged-flag marks stay set on settled free cells, the
+                                   changed-flag marks on buffers full of changes)
 hit buffers        2 where used    uint16 shift registers of hits in open unknown space, in
                                    tiles of 64 x 64 cells made where a scan first hits it
 drawn, hit marks   2/8             bits per cell: drawn from hits; hit this scan
@@ -83,7 +85,9 @@ class ScanReport:
     valid_beams: int = 0
     detected_changes: int = 0      # beams kept as detected changes by the run filter
     raw_detected_changes: int = 0  # beams the classifier found changed, before the run filter
-    changed_flags: int = 0         # cells that got a changed flag
+    # cells that got a changed flag, but for those whose buffers are full of them
+    # (docs/algorithm.md, "Changed flags that would change nothing")
+    changed_flags: int = 0
     new_obstacle_flags: int = 0    # ... of them, hit cells of new obstacles
     # cells that got an unchanged flag, but for the free cells where one would change nothing
     # (docs/algorithm.md, "Unchanged flags that would change nothing")
@@ -145,6 +149,7 @@ class MapUpdater:
         self._seen = np.zeros(self._ref.shape if own else (0, 0), np.uint8)
         n_bytes = (self._ref.size + 7) // 8
         self._decided = np.zeros(n_bytes, np.uint8)
+        # set between scans on the cells where a changed flag would change nothing
         self._ch_marks = np.zeros(n_bytes, np.uint8)
         # set between scans on the free cells where an unchanged flag would change nothing
         self._un_marks = steps.settled_marks(self._ref, self._hist, config)
@@ -431,6 +436,7 @@ class MapUpdater:
         if not packed:
             self._restore_counts(path, hist, seen)
         self._un_marks = steps.settled_marks(self._ref, self._hist, self.config)
+        self._ch_marks = steps.full_marks(self._hist, self.config)
         ref = self._ref.reshape(-1)
         self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
                                                           self._seen.reshape(-1), ref,

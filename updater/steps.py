@@ -618,6 +618,14 @@ def settled_marks(ref: np.ndarray, hist: np.ndarray, cfg: UpdaterConfig) -> np.n
     return out
 
 
+def full_marks(hist: np.ndarray, cfg: UpdaterConfig) -> np.ndarray:
+    """The changed-flag marks between scans: a bit per cell, set on the cells whose buffers are
+    full of changes (a changed flag would change nothing there but a count no rule reads, so
+    no walk makes one: ``push_and_decide``)."""
+    mask = np.uint16(buffer_mask(cfg))
+    return np.packbits((hist.reshape(-1) & mask) == mask, bitorder="little")
+
+
 def support_mode(cfg: UpdaterConfig) -> int:
     """The neighbour support the decision kernels apply: 0 none, 1 the paper's two states
     (free / occupied-or-unknown), 2 the same value of M (``support_exact_state``)."""
@@ -660,10 +668,11 @@ def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.n
                     decided: np.ndarray, n_changed: int, n_unchanged: int, width: int,
                     cfg: UpdaterConfig, res: float, ch_marks: np.ndarray, un_marks: np.ndarray,
                     ws: Workspace) -> int:
-    """``push_flags`` then ``decide`` in one kernel call (the changed-flag marks, all clear
-    after the push, serve the decision as its stamps). The unchanged-flag marks stay set on
-    the free cells whose buffers are settled (``settled_marks``). Returns the change of the
-    number of changed cells."""
+    """``push_flags`` then ``decide`` in one kernel call (the changed-flag marks, after the push
+    set on the cells whose buffers are full of changes alone, serve the decision as its
+    stamps). Between scans the unchanged-flag marks stay set on the free cells whose buffers
+    are settled (``settled_marks``), the changed-flag marks on the cells whose buffers are
+    full of changes (``full_marks``). Returns the change of the number of changed cells."""
     ws.for_moved(n_changed + n_unchanged)
     st = ws.settings(cfg, res)
     return int(kernels().push_and_decide(

@@ -131,8 +131,8 @@ def time_scans(ref: OccupancyGrid, scans, passes: int = 3) -> dict:
 PARTS = (("classifier: per-beam inputs (prepare_beams)", ("prepare_beams",)),
          ("classifier: virtual beams cast, compared, run filter (classify_scan)",
           ("classify_scan",)),
-         ("changed and unchanged flags: guard, walks, hit cells (flag_scan)", ("flag_scan",)),
-         ("push and decide (push_and_decide)", ("push_and_decide",)))
+         ("changed and unchanged flags (guard, walks, hit cells), then push and decide "
+          "(flag_push_decide)", ("flag_push_decide", "push_and_decide")))
 
 
 def time_parts(ref: OccupancyGrid, scans) -> dict:
@@ -174,14 +174,16 @@ def time_parts(ref: OccupancyGrid, scans) -> dict:
 
 def time_inner(ref: OccupancyGrid, scans) -> dict:
     """Mean time per scan [ms] of the heaviest work inside ``classify_scan`` and
-    ``flag_scan``, run again alone on each scan's recorded inputs, best of three passes: the
-    virtual beams' cast and the walks (each from the marks it met in the scan: the free walks
-    from the unchanged-flag marks of the settled free cells, the others from none)."""
+    ``flag_push_decide``, run again alone on each scan's recorded inputs, best of three
+    passes: the virtual beams' cast and the walks (each from the marks it met in the scan: the
+    free walks from the unchanged-flag marks of the settled free cells, the others from
+    none)."""
     from updater import steps
 
     kernels = steps.kernels()
     seen = []
-    originals = {name: getattr(kernels, name) for name in ("classify_scan", "flag_scan")}
+    originals = {name: getattr(kernels, name)
+                 for name in ("classify_scan", "flag_push_decide")}
 
     def record(name, fn):
         def call(*args, **kwargs):

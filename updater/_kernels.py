@@ -1194,6 +1194,41 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
 
 
 @njit(cache=True)
+def flag_push_decide(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_select,
+                     removed_reach, tol, free_reach, expected, directions, found, guard,
+                     unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap,
+                     skips, ch_marks, un_marks, hit_marks, protected, hits_unknown, into,
+                     unknown_reach, scratch, changed, unchanged, hist, seen, decided, mask,
+                     threshold, few, support, moved, shift, full, directory, pool, drawn,
+                     missing):
+    """``flag_scan``, then ``push_and_decide`` if ``moved`` has room for the scan's flags, then
+    (``grow``) ``push_hits`` if every unknown cell hit has its tile (``missing_hit_tiles``,
+    into ``missing``): one call from Python instead of four. Returns (changed flags,
+    new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells hit, the change of the
+    number of changed cells, that of the drawn cells, the tiles missing: -1 when ``moved``
+    had no room, and neither push was made)."""
+    n_ch, n_new, n_gaps, n_un, n_hits = flag_scan(
+        ref, enclosed, clear, sensor, hits, ranges, verdict, removed_select, removed_reach,
+        tol, free_reach, expected, directions, found, guard, unknown_guard, grow, short, gaps,
+        margin, confirm, cap, increment, wrap, skips, ch_marks, un_marks, hit_marks,
+        protected, hits_unknown, into, unknown_reach, scratch, changed, unchanged)
+    if n_ch + n_un > moved.shape[0]:
+        return n_ch, n_new, n_gaps, n_un, n_hits, 0, 0, -1
+    width = ref.shape[1]
+    flat = ref.reshape(-1)
+    d_changed = push_and_decide(hist, seen, flat, decided, changed[:n_ch], unchanged[:n_un],
+                                mask, threshold, few, support, width, ch_marks, un_marks, moved,
+                                shift, full)
+    n_missing = missing_hit_tiles(directory, width, hits_unknown[:n_hits], missing) if grow \
+        else 0
+    d_drawn = 0
+    if grow and n_missing == 0:
+        d_drawn = push_hits(directory, pool, width, flat, enclosed, hits_unknown[:n_hits],
+                            changed[:n_ch], mask, threshold, few, hit_marks, drawn)
+    return n_ch, n_new, n_gaps, n_un, n_hits, d_changed, d_drawn, n_missing
+
+
+@njit(cache=True)
 def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
                     support, width, ch_marks, un_marks, moved, shift=0, full=NEVER_SETTLED):
     """``push_flags`` then ``decide`` in one call, the changed-flag marks kept between scans on

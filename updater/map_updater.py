@@ -215,17 +215,15 @@ class MapUpdater:
     def _flag_push_decide(self, beams) -> tuple[int, int, int]:
         """Steps 2-3 and the buffers for a scan past the lost check: (changed flags,
         new-obstacle flags, unchanged flags)."""
-        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
         # the seen-surface guard, fill_gaps, the growth into the unknown and the hits that
-        # confirm M's surfaces (flag_hit_surfaces) are not in the paper; flag_scan runs the
-        # steps guard_seen_surfaces ... release_unknown_hits in one call
-        n_ch, n_new, n_un, n_hits = steps.flag_scan(
-            ref, beams, cfg, res, (self._ch_marks, self._un_marks, self._hit_marks),
-            self._enclosed, ws)
-        self._push_and_decide(n_ch, n_un)
-        if cfg.grow_into_unknown:
-            self._n_drawn += steps.push_hits(self._hits, ref, self._enclosed, n_hits, n_ch,
-                                             cfg, res, self._hit_marks, self._drawn, ws)
+        # confirm M's surfaces (flag_hit_surfaces) are not in the paper
+        n_ch, n_new, n_un, d_changed, d_drawn = steps.flag_push_decide(
+            self._ref, beams, self.config, self._res,
+            (self._ch_marks, self._un_marks, self._hit_marks), self._enclosed, self._ws,
+            (self._hist.reshape(-1), self._seen.reshape(-1), self._decided), self._hits,
+            self._drawn)
+        self._n_changed += d_changed
+        self._n_drawn += d_drawn
         return n_ch, n_new, n_un
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:

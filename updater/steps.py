@@ -4,10 +4,10 @@
 steps of their own: ``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the
 changed-cells evaluator, ``fill_gaps`` after it, ``flag_hit_surfaces`` after the
 unchanged-cells evaluator, and the growth into the unknown (``list_unknown_hits``,
-``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``flag_scan`` runs
-the steps from the guard to ``release_unknown_hits`` in one kernel call, as ``MapUpdater``
-does for every scan it processes: each kernel call from Python has a fixed cost, which a
-scan of a few hundred beams feels. ``close_outlines`` builds the output map on demand,
+``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``flag_push_decide``
+runs the steps from the guard to ``release_unknown_hits``, then the push, the decision and
+``push_hits``, in one kernel call, as ``MapUpdater`` does for every scan it processes: each
+kernel call from Python has a fixed cost, which a scan of a few hundred beams feels. ``close_outlines`` builds the output map on demand,
 ``enclosed_unknown`` prepares the last check once per reference map.
 
 Each function takes the per-beam quantities from the classifier (computed in its kernel,
@@ -534,35 +534,51 @@ def decide_drawn(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, cfg: Up
                                       few=cfg.unanimous_min, drawn=drawn))
 
 
-# --- steps 2 and 3 in one call ----------------------------------------------------------------
-def flag_scan(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
-              marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
-              ws: Workspace) -> tuple[int, int, int, int]:
+# --- steps 2 and 3 and the buffers in one call ------------------------------------------------
+def flag_push_decide(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
+                     marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
+                     ws: Workspace, buffers: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     tiles: HitTiles, drawn: np.ndarray) -> tuple[int, int, int, int, int]:
     """What ``guard_seen_surfaces``, ``list_unknown_hits`` (with ``grow_into_unknown``),
     ``flag_changed_cells``, ``flag_unknown_seen_through``, ``release_seen_surfaces``,
     ``fill_gaps``, ``flag_unchanged_cells``, ``flag_hit_surfaces`` and
-    ``release_unknown_hits`` do one after the other, in one kernel call (``marks``: the
-    changed-flag, unchanged-flag and hit marks). Returns (changed flags, new-obstacle and
-    fill_gaps flags, unchanged flags, unknown cells hit, listed in ``ws.hits_unknown``)."""
+    ``release_unknown_hits`` do one after the other, then ``push_and_decide`` and
+    ``push_hits``, in one kernel call (``marks``: the changed-flag, unchanged-flag and hit
+    marks; ``buffers``: the flat buffers, counts and decided bits). The pushes are left to
+    calls of their own when the workspace lacks room for the scan's flags, or a hit cell its
+    tile. Returns (changed flags, new-obstacle and fill_gaps flags, unchanged flags, the
+    change of the number of changed cells, that of the drawn cells)."""
     st = ws.settings(cfg, res)
     guard = st.radius if st.radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
     ws.for_protected(min(beams.hits.shape[0] * st.side * st.side, ref.size) if guard else 0)
     ws.for_unknown_hits(beams.hits.shape[0])
+    ws.for_moved(0)
+    missing = ws.for_missing_tiles(beams.hits.shape[0])
     ch_marks, un_marks, hit_marks = marks
-    n_ch, n_new, n_gaps, n_un, n_hits = kernels().flag_scan(
-        ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits, ranges=beams.ranges,
-        verdict=beams.verdict, removed_select=removed_select(beams, cfg),
-        removed_reach=removed_reach(beams), tol=beams.tol,
-        free_reach=beams.free_reach, expected=beams.own_expected,
-        directions=beams.own_direction, found=beams.own_found, guard=guard,
-        unknown_guard=st.unknown_guard, grow=cfg.grow_into_unknown, short=st.short,
-        gaps=st.gaps, margin=cfg.fill_gaps_free_margin,
-        confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
-        increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
-        un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
-        hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
-        scratch=ws.scratch, changed=ws.changed, unchanged=ws.unchanged)
-    return int(n_ch), int(n_new + n_gaps), int(n_un), int(n_hits)
+    hist, seen, decided = buffers
+    n_ch, n_new, n_gaps, n_un, n_hits, d_changed, d_drawn, n_missing = \
+        kernels().flag_push_decide(
+            ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits,
+            ranges=beams.ranges, verdict=beams.verdict, removed_select=removed_select(beams, cfg),
+            removed_reach=removed_reach(beams), tol=beams.tol, free_reach=beams.free_reach,
+            expected=beams.own_expected, directions=beams.own_direction, found=beams.own_found,
+            guard=guard, unknown_guard=st.unknown_guard, grow=cfg.grow_into_unknown,
+            short=st.short, gaps=st.gaps, margin=cfg.fill_gaps_free_margin,
+            confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
+            increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
+            un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
+            hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
+            scratch=ws.scratch, changed=ws.changed, unchanged=ws.unchanged, hist=hist,
+            seen=seen, decided=decided, mask=st.mask, threshold=cfg.threshold,
+            few=cfg.unanimous_min, support=st.support, moved=ws.moved, shift=st.shift,
+            full=st.full, directory=tiles.directory, pool=tiles.pool, drawn=drawn,
+            missing=missing)
+    if n_missing < 0:           # no room for the flags' entries: the pushes, one by one
+        d_changed = push_and_decide(hist, seen, ref.reshape(-1), decided, n_ch, n_un,
+                                    ref.shape[1], cfg, res, ch_marks, un_marks, ws)
+    if n_missing != 0 and cfg.grow_into_unknown:
+        d_drawn = push_hits(tiles, ref, enclosed, n_hits, n_ch, cfg, res, hit_marks, drawn, ws)
+    return int(n_ch), int(n_new + n_gaps), int(n_un), int(d_changed), int(d_drawn)
 
 
 def removed_select(beams: Beams, cfg: UpdaterConfig) -> np.ndarray:

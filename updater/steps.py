@@ -84,7 +84,8 @@ class Workspace:
         self._virtual = -1
         self._walk = -1
         self._flags = -1
-        self._moved = -1
+        self._moved = 0
+        self.moved = np.zeros(0, np.int32)     # grown by the first push that needs room
         self._protected = -1
         self._own = None
         self._layout = self._layout_cfg = None
@@ -552,7 +553,6 @@ def flag_push_decide(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: flo
     guard = st.radius if st.radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
     ws.for_protected(min(beams.hits.shape[0] * st.side * st.side, ref.size) if guard else 0)
     ws.for_unknown_hits(beams.hits.shape[0])
-    ws.for_moved(0)
     missing = ws.for_missing_tiles(beams.hits.shape[0])
     ch_marks, un_marks, hit_marks = marks
     hist, seen, decided = buffers

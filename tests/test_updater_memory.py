@@ -136,6 +136,30 @@ def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
     assert np.array_equal(again.dense(), tiles.dense())
 
 
+def test_tiles_made_in_the_kernel_are_those_hit_tiles_makes_and_none_without_room():
+    rng = np.random.default_rng(5)
+    shape = (300, 450)                       # 5 x 8 tiles
+    by_numpy, by_kernel = HitTiles(shape), HitTiles(shape)
+    for tiles in (by_numpy, by_kernel):      # room for 8 tiles, 2 of them in use
+        tiles.make(np.array([3, 17]))
+        tiles.make(np.array([30, 31, 32, 33, 34, 35]))
+        tiles.pool[2:] = 0
+        tiles.directory.reshape(-1)[30:36] = -1
+        tiles.count[0] = 2
+    wanted = np.array([12, 5, 12, 39, 5, 0])     # repeats, unsorted, none made yet
+    by_numpy.make(wanted)
+    assert K.make_hit_tiles(by_kernel.directory, by_kernel.pool.shape[0], by_kernel.count,
+                            wanted) == 0
+    assert np.array_equal(by_kernel.directory, by_numpy.directory)
+    assert by_kernel.used == by_numpy.used == 6
+    # four new tiles with room for two: nothing is made, the caller grows the pool
+    before = by_kernel.directory.copy()
+    more = rng.choice(np.flatnonzero(before.reshape(-1) < 0), 4, replace=False)
+    assert K.make_hit_tiles(by_kernel.directory, by_kernel.pool.shape[0], by_kernel.count,
+                            np.concatenate([more, more[:1]])) == 5
+    assert np.array_equal(by_kernel.directory, before) and by_kernel.used == 6
+
+
 @pytest.mark.parametrize("buffer_size, threshold", [(10, 7), (12, 12), (11, 8)])
 def test_packed_counts_are_a_plain_count_saturating_at_the_top_of_their_field(buffer_size,
                                                                              threshold):

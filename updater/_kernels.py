@@ -899,6 +899,26 @@ def missing_hit_tiles(directory, width, cells, out):
 
 
 @njit(cache=True)
+def make_hit_tiles(directory, rows, count, tiles):
+    """``HitTiles.make`` while the pool (``rows`` tiles) has room for all of ``tiles`` (flat
+    indices into ``directory``, repeats allowed, each missing): the same tiles made in the same
+    order, ``count[0]`` the tiles in use. Returns 0, or the count of ``tiles`` when there is no
+    room and nothing was made."""
+    order = np.sort(tiles)
+    n_new = 0
+    for k in range(order.shape[0]):
+        n_new += k == 0 or order[k] != order[k - 1]
+    if count[0] + n_new > rows:
+        return tiles.shape[0]
+    flat = directory.reshape(-1)
+    for k in range(order.shape[0]):
+        if k == 0 or order[k] != order[k - 1]:
+            flat[order[k]] = count[0]
+            count[0] += 1
+    return 0
+
+
+@njit(cache=True)
 def push_hits(directory, pool, width, ref_flat, enclosed, hit_cells, changed, mask, threshold,
               few, hit_marks, drawn):
     """The hit buffers of open unknown cells, ``hit = ((hit << 1) | flag) & mask`` (in the
@@ -1199,11 +1219,12 @@ def flag_push_decide(ref, enclosed, clear, sensor, hits, ranges, verdict, remove
                      unknown_guard, grow, short, gaps, margin, confirm, cap, increment, wrap,
                      skips, ch_marks, un_marks, hit_marks, protected, hits_unknown, into,
                      unknown_reach, scratch, changed, unchanged, hist, seen, decided, mask,
-                     threshold, few, support, moved, shift, full, directory, pool, drawn,
+                     threshold, few, support, moved, shift, full, directory, pool, used, drawn,
                      missing):
     """``flag_scan``, then ``push_and_decide`` if ``moved`` has room for the scan's flags, then
-    (``grow``) ``push_hits`` if every unknown cell hit has its tile (``missing_hit_tiles``,
-    into ``missing``): one call from Python instead of four. Returns (changed flags,
+    (``grow``) ``push_hits`` once every unknown cell hit has its tile (``missing_hit_tiles``,
+    into ``missing``; ``make_hit_tiles`` while the pool has room, ``used`` the tiles in use):
+    one call from Python instead of four. Returns (changed flags,
     new-obstacle flags, fill_gaps flags, unchanged flags, unknown cells hit, the change of the
     number of changed cells, that of the drawn cells, the tiles missing: -1 when ``moved``
     had no room, and neither push was made)."""
@@ -1221,6 +1242,8 @@ def flag_push_decide(ref, enclosed, clear, sensor, hits, ranges, verdict, remove
                                 shift, full)
     n_missing = missing_hit_tiles(directory, width, hits_unknown[:n_hits], missing) if grow \
         else 0
+    if n_missing > 0:
+        n_missing = make_hit_tiles(directory, pool.shape[0], used, missing[:n_missing])
     d_drawn = 0
     if grow and n_missing == 0:
         d_drawn = push_hits(directory, pool, width, flat, enclosed, hits_unknown[:n_hits],

@@ -27,11 +27,17 @@ class HitTiles:
         n_cols = -(-width >> TILE_SHIFT) if enabled else 0
         self.directory = np.full((n_rows, n_cols), -1, np.int32)
         self.pool = np.zeros((0, TILE_CELLS), np.uint16)
-        self.used = 0                # tiles of the pool in use
+        # tiles of the pool in use, in an array so that a kernel can make tiles while the pool
+        # has room (``_kernels.make_hit_tiles``); the rows past them are all zero
+        self.count = np.zeros(1, np.int64)
+
+    @property
+    def used(self) -> int:
+        return int(self.count[0])
 
     @property
     def nbytes(self) -> int:
-        return self.directory.nbytes + self.pool.nbytes
+        return self.directory.nbytes + self.pool.nbytes + self.count.nbytes
 
     def ensure(self, cells: np.ndarray) -> None:
         """Make the tiles holding ``cells`` (flat indices into the map) where there are none."""
@@ -48,13 +54,14 @@ class HitTiles:
         missing = np.unique(tiles[flat[tiles] < 0])
         if missing.size == 0:
             return
-        need = self.used + missing.size
+        used = self.used
+        need = used + missing.size
         if need > self.pool.shape[0]:
             grown = np.zeros((max(need, 2 * self.pool.shape[0], 4), TILE_CELLS), np.uint16)
-            grown[:self.used] = self.pool[:self.used]
+            grown[:used] = self.pool[:used]
             self.pool = grown
-        flat[missing] = np.arange(self.used, need, dtype=np.int32)
-        self.used = need
+        flat[missing] = np.arange(used, need, dtype=np.int32)
+        self.count[0] = need
 
     def dense(self) -> np.ndarray:
         """The buffers as one (H, W) uint16 array (for saving)."""

@@ -571,8 +571,8 @@ def flag_push_decide(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: flo
             scratch=ws.scratch, changed=ws.changed, unchanged=ws.unchanged, hist=hist,
             seen=seen, decided=decided, mask=st.mask, threshold=cfg.threshold,
             few=cfg.unanimous_min, support=st.support, moved=ws.moved, shift=st.shift,
-            full=st.full, directory=tiles.directory, pool=tiles.pool, drawn=drawn,
-            missing=missing)
+            full=st.full, directory=tiles.directory, pool=tiles.pool, used=tiles.count,
+            drawn=drawn, missing=missing)
     if n_missing < 0:           # no room for the flags' entries: the pushes, one by one
         d_changed = push_and_decide(hist, seen, ref.reshape(-1), decided, n_ch, n_un,
                                     ref.shape[1], cfg, res, ch_marks, un_marks, ws)

@@ -154,6 +154,20 @@ def test_fused_walks_flag_the_cells_of_the_plain_walks_in_order(seed, kind, worl
             sorted(expect)
 
 
+def entries(data, clear, sensor, hits):
+    """Where each beam's ray from the sensor first enters a cell that is not free (the
+    expected point of a virtual beam along it), as ``cast_virtual`` finds it."""
+    from gridmap import _kernels as G
+
+    d = hits - sensor[:2]
+    d /= np.hypot(*d.T)[:, None]
+    out = np.zeros_like(hits)
+    for i, (ca, sa) in enumerate(d):
+        t, _ = G.first_blocked(data, clear, K.CLEAR_SHIFT, sensor[0], sensor[1], ca, sa, 1e4)
+        out[i] = sensor[:2] + t * d[i]
+    return out
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_one_walk_per_beam_flags_what_the_walks_one_after_the_other_flag(seed):
     """``walk_scan`` against the removed-obstacle, free and unknown walks of ``walk_beams``
@@ -184,12 +198,51 @@ def test_one_walk_per_beam_flags_what_the_walks_one_after_the_other_flag(seed):
                                 skips)
         else:
             n_ch, n_un = K.walk_scan(data, bits, blocks, sensor, hits, verdict, removed_reach,
-                                     verdict, free_reach, skips, into, unknown_reach, 1000,
-                                     ch_marks, un_marks, changed, 0, unchanged, 0)
+                                     verdict, free_reach, skips, into, unknown_reach,
+                                     entries(data, blocks, sensor, hits), 1000, ch_marks,
+                                     un_marks, changed, 0, unchanged, 0)
         want.append((sorted(changed[:n_ch].tolist()), sorted(unchanged[:n_un].tolist()),
                      ch_marks.tolist(), un_marks.tolist()))
     assert want[0] == want[1]
     assert len(want[0][0]) > 50 and len(want[0][1]) > 200
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_walks_into_unknown_space_that_start_where_their_ray_entered_it_flag_the_same(seed):
+    """Beams through a free hall into unknown space beyond it (with holes, walls and enclosed
+    cells in it): ``walk_scan`` with each beam's entry point, which starts the walks that go
+    into unknown space only near it, against ``walk_beams``' walks from the sensor."""
+    rng = np.random.default_rng(70 + seed)
+    data, enclosed = open_map(rng, 160, 170)
+    band = rng.integers(40, 70)
+    data[:, :band][rng.random((160, band)) < 0.7] = UNKNOWN     # unknown, with free holes
+    data[rng.integers(0, 160, 40), rng.integers(0, band, 40)] = OCCUPIED
+    sensor = np.array([rng.uniform(band + 30, 150), rng.uniform(40, 120), 0.0])
+    if seed == 5:       # on a cell corner, beams along the axes and the diagonals
+        sensor[:2] = np.floor(sensor[:2])
+    n = 181
+    a = rng.uniform(0.5, 1.0) * math.pi + math.pi / n * np.arange(n)
+    a[:4] = [math.pi, 0.75 * math.pi, 1.25 * math.pi, math.pi]
+    r = rng.uniform(band + 60, band + 140, n)
+    hits = np.c_[sensor[0] + r * np.cos(a), sensor[1] + r * np.sin(a)]
+    into, reach = rng.random(n) < 0.8, rng.uniform(0.3, 1.0, n)
+    verdict = np.where(rng.random(n) < 0.3, K.UNCHANGED, K.CHANGE).astype(np.int8)
+    free_reach, removed_reach = np.full(n, 0.9), np.where(rng.random(n) < 0.2, 0.9, -1.0)
+    bits = np.packbits(enclosed.reshape(-1), bitorder="little")
+    clear = steps.clear_blocks(data)
+    got = []
+    for entered in (K.NO_ENTRIES, entries(data, clear, sensor, hits)):
+        ch_marks, un_marks = np.zeros_like(bits), np.zeros_like(bits)
+        changed, unchanged = np.zeros(data.size + 1, np.int32), np.zeros(data.size + 1, np.int32)
+        n_ch, n_un = K.walk_scan(data, bits, clear, sensor, hits, verdict, removed_reach,
+                                 verdict, free_reach, np.zeros(n), into, reach, entered, 1000,
+                                 ch_marks, un_marks, changed, 0, unchanged, 0)
+        got.append((sorted(changed[:n_ch].tolist()), sorted(unchanged[:n_un].tolist())))
+    assert got[0] == got[1] and len(got[0][0]) > 150
+    # most walks into unknown space alone start far out
+    alone = into & (verdict == K.CHANGE) & (removed_reach <= 0)
+    start = np.hypot(*(entries(data, clear, sensor, hits) - sensor[:2]).T)
+    assert alone.sum() > 60 and np.median(start[alone]) > 25
 
 
 def plain_clear_blocks(data, size):
@@ -298,8 +351,8 @@ def guarded_walk_flags(data, bits, sensor, hits, verdict, reach, into, unknown_r
     changed, unchanged = np.zeros(data.size + 1, np.int32), np.zeros(data.size + 1, np.int32)
     n_ch, _ = K.walk_scan(data, bits, steps.clear_blocks(data), sensor, hits, verdict, reach,
                           verdict, np.full(len(hits), 0.98), np.zeros(len(hits)), into,
-                          unknown_reach, 1000, marks, np.zeros_like(bits), changed, 0,
-                          unchanged, 0)
+                          unknown_reach, K.NO_ENTRIES, 1000, marks, np.zeros_like(bits),
+                          changed, 0, unchanged, 0)
     return changed[:n_ch].tolist()
 
 

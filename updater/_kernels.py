@@ -392,6 +392,10 @@ WALK_OPEN_UNKNOWN = 2
 # walk_beams without its shortcuts: the plain walks the fused ones are checked against
 NO_BLOCKS = np.zeros((0, 0), np.uint8)
 NO_SKIPS = np.zeros(0, np.float64)
+NO_ENTRIES = np.zeros((0, 2), np.float64)
+# [grid units] a walk into unknown space starts this far short of where the beam's expected
+# ray entered it (``walk_scan``): the walk's segment and the ray agree but for rounding
+ENTRY_MARGIN = 2.0
 # ``settled``'s bound past every buffer: none is settled
 NEVER_SETTLED = 0x10000
 
@@ -492,17 +496,18 @@ def free_walk_skips(sensor, hits, reach, select, want, increment, wrap, cap, out
 def _walk_start(clear, jumps, late, gx0, gy0, tx, ty, cx, cy, n_x, n_y, step_x, step_y,
                 t_delta_x, t_delta_y, t_max_x, t_max_y):
     """Where a walk from (gx0, gy0) to (tx, ty), at cell (cx, cy), begins flagging: past the
-    square of clear blocks around it (``jumps``, a walk that flags no free cell), or ``late``
-    grid units from the sensor (a free walk's ``free_walk_skips``, 0: none). Returns the walk's
-    state there and the cells passed over: (cx, cy, n_x, n_y, t_max_x, t_max_y, passed)."""
+    square of clear blocks around it (``jumps``, a walk that flags no free cell), and at least
+    ``late`` grid units from the sensor (a free walk's ``free_walk_skips``, or where a walk
+    into unknown space meets it; 0: none). Returns the walk's state there and the cells
+    passed over: (cx, cy, n_x, n_y, t_max_x, t_max_y, passed)."""
     p = -1.0
     if jumps and clear.shape[0] > 0:
         # the square of clear blocks around the sensor, with a margin inside it: the jump's
         # closed-form sums may round either way
         p = min(clear_exit(clear, CLEAR_SHIFT, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
                            t_delta_y), 1.0) - 1e-9
-    elif late > 0.0:
-        p = min(late / math.sqrt((tx - gx0) ** 2 + (ty - gy0) ** 2), 1.0 - 1e-9)
+    if late > 0.0:
+        p = max(p, min(late / math.sqrt((tx - gx0) ** 2 + (ty - gy0) ** 2), 1.0 - 1e-9))
     if not (p > t_max_x or p > t_max_y):
         return cx, cy, n_x, n_y, t_max_x, t_max_y, 0
     kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
@@ -1015,8 +1020,8 @@ def _walk_count(gx0, gy0, hit, reach, drop_last, cap, height, width):
 
 @njit(cache=True)
 def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach, verdict,
-              free_reach, skips, into, unknown_reach, cap, ch_marks, un_marks, changed, n_ch,
-              unchanged, n_un):
+              free_reach, skips, into, unknown_reach, entered, cap, ch_marks, un_marks, changed,
+              n_ch, unchanged, n_un):
     """The removed-obstacle walks (``removed_select`` CHANGE), the free walks (``verdict``
     UNCHANGED) and the walks into unknown space (``into``) of ``walk_beams``, each beam walked
     once to the furthest of its ends: changed flags into ``changed`` after n_ch (marks
@@ -1024,7 +1029,10 @@ def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
     those of the walks one after the other, up to the order of the lists and to the cells
     where a segment passes within about 1e-12 of a corner (the shorter walk's cells are taken
     as the first ones of the longer). ``skips``: ``free_walk_skips``, used by the beams that
-    walk free space only. Returns (n_ch, n_un)."""
+    walk free space only. ``entered`` (an empty array: none): per beam, the point where its
+    expected ray entered unknown space (``expected`` of a beam that ``unknown_walks`` sends
+    there); a beam that walks into unknown space only starts ``ENTRY_MARGIN`` short of it,
+    as every cell its ray crossed before lies free. Returns (n_ch, n_un)."""
     height, width = ref.shape
     flat = ref.reshape(-1)
     gx0, gy0 = sensor[0], sensor[1]
@@ -1042,9 +1050,12 @@ def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
                                  width)
             if second > first:
                 reach = unknown_reach[i]
+        late = skips[i] if f and not u else 0.0
+        if u and not (a or f) and entered.shape[0] > 0:
+            late = max(math.sqrt((entered[i, 0] - gx0) ** 2 + (entered[i, 1] - gy0) ** 2)
+                       - ENTRY_MARGIN, 0.0)
         n_ch, n_un = _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hits[i],
-                                  reach, a, f, u, first, second, cap,
-                                  skips[i] if f and not u else 0.0, ch_marks, un_marks,
+                                  reach, a, f, u, first, second, cap, late, ch_marks, un_marks,
                                   changed, n_ch, unchanged, n_un)
     return n_ch, n_un
 
@@ -1055,7 +1066,7 @@ def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, 
     """One beam of ``walk_scan``: the segment to ``reach`` of the way to ``hit``; the first
     ``first`` cells flagged as its removed-obstacle (``a``) or free (``f``) walk flags them,
     the first ``second`` as its walk into unknown space (``u``) does (-1 for a beam with one
-    walk: that walk's own cells)."""
+    walk: that walk's own cells); from ``skip`` grid units from the sensor (0: from it)."""
     tx = gx0 + reach * (hit[0] - gx0)
     ty = gy0 + reach * (hit[1] - gy0)
     cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
@@ -1065,9 +1076,10 @@ def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, 
         if own > 0 and not f and 0.0 <= tx < width and 0.0 <= ty < height:
             own -= 1
         first, second = (own, 0) if a or f else (0, own)
+    # a late start only for a walk that ``cap`` does not cut short (it counts from the start)
     cx, cy, n_x, n_y, t_max_x, t_max_y, done = _walk_start(
-        clear, not f, skip if first == n_x + n_y + 1 else 0.0, gx0, gy0, tx, ty, cx, cy, n_x,
-        n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y)
+        clear, not f, skip if 0 <= n_x and n_x + n_y + 1 <= cap else 0.0, gx0, gy0, tx, ty,
+        cx, cy, n_x, n_y, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y)
     idx = cy * width + cx
     row_step = step_y * width
     both = min(first, second) if (a or f) and u else 0
@@ -1195,8 +1207,8 @@ def flag_scan(ref, enclosed, clear, sensor, hits, ranges, verdict, removed_selec
     free_walk_skips(sensor, hits, free_reach, verdict, UNCHANGED, increment, wrap, cap, skips)
     unmark_changing(ref, hits, tol, verdict, gaps, ch_marks, un_marks, scratch)
     n, n_un = walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
-                        verdict, free_reach, skips, into, unknown_reach, cap, ch_marks,
-                        un_marks, changed, 0, unchanged, 0)
+                        verdict, free_reach, skips, into, unknown_reach, expected, cap,
+                        ch_marks, un_marks, changed, 0, unchanged, 0)
     n_ch = flag_new_obstacles(ref, hits, tol, verdict, ch_marks, changed, n, scratch)
     n_new = n_ch - n
     clear_bits(ch_marks, protected, n_guarded)

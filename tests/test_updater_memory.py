@@ -137,6 +137,7 @@ def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
 
 
 def test_tiles_made_in_the_kernel_are_those_hit_tiles_makes_and_none_without_room():
+    """Both against the tile numbers written out below."""
     rng = np.random.default_rng(5)
     shape = (300, 450)                       # 5 x 8 tiles
     by_numpy, by_kernel = HitTiles(shape), HitTiles(shape)
@@ -152,6 +153,10 @@ def test_tiles_made_in_the_kernel_are_those_hit_tiles_makes_and_none_without_roo
                             wanted) == 0
     assert np.array_equal(by_kernel.directory, by_numpy.directory)
     assert by_kernel.used == by_numpy.used == 6
+    # the new tiles in ascending order after the two in use, the others untouched
+    want = np.full(by_kernel.directory.size, -1)
+    want[[3, 17, 0, 5, 12, 39]] = np.arange(6)
+    assert np.array_equal(by_kernel.directory.reshape(-1), want)
     # four new tiles with room for two: nothing is made, the caller grows the pool
     before = by_kernel.directory.copy()
     more = rng.choice(np.flatnonzero(before.reshape(-1) < 0), 4, replace=False)

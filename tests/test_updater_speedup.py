@@ -210,8 +210,9 @@ def test_one_walk_per_beam_flags_what_the_walks_one_after_the_other_flag(seed):
 @pytest.mark.parametrize("seed", range(6))
 def test_walks_into_unknown_space_that_start_where_their_ray_entered_it_flag_the_same(seed):
     """Beams through a free hall into unknown space beyond it (with holes, walls and enclosed
-    cells in it): ``walk_scan`` with each beam's entry point, which starts the walks that go
-    into unknown space only near it, against ``walk_beams``' walks from the sensor."""
+    cells in it): ``walk_scan`` with each beam's entry point, which starts the walks that flag
+    no free cell (into unknown space, with or without a removed-obstacle walk) near it,
+    against ``walk_beams``' walks from the sensor."""
     rng = np.random.default_rng(70 + seed)
     data, enclosed = open_map(rng, 160, 170)
     band = rng.integers(40, 70)
@@ -239,10 +240,11 @@ def test_walks_into_unknown_space_that_start_where_their_ray_entered_it_flag_the
                                  ch_marks, un_marks, changed, 0, unchanged, 0)
         got.append((sorted(changed[:n_ch].tolist()), sorted(unchanged[:n_un].tolist())))
     assert got[0] == got[1] and len(got[0][0]) > 150
-    # most walks into unknown space alone start far out
-    alone = into & (verdict == K.CHANGE) & (removed_reach <= 0)
+    # most walks into unknown space, alone or with a removed-obstacle walk, start far out
     start = np.hypot(*(entries(data, clear, sensor, hits) - sensor[:2]).T)
-    assert alone.sum() > 60 and np.median(start[alone]) > 25
+    for removed, beams in ((False, 60), (True, 12)):
+        late = into & (verdict == K.CHANGE) & ((removed_reach > 0) == removed)
+        assert late.sum() > beams and np.median(start[late]) > 25
 
 
 def plain_clear_blocks(data, size):

@@ -290,7 +290,10 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
     of clear blocks (``clear_blocks(data, shift, clear)``) instead of stepping through their
     cells: the same blocking cell, its distance equal up to rounding in the last bits. Its
     steps between the jumps are ``first_hit``'s, written out again so that ``first_hit`` (the
-    simulator's and the localiser's casts) keeps a loop with no block lookups."""
+    simulator's and the localiser's casts) keeps a loop with no block lookups. The blocks are
+    looked up where the cast starts and wherever a jump lands, and no more once one is not
+    clear: a lookup that finds nothing costs a few steps (a branch the processor cannot
+    foresee), and a cast through clutter would pay for many."""
     height = data.shape[0]
     width = data.shape[1]
     if not (0.0 <= gx0 < width and 0.0 <= gy0 < height):
@@ -303,18 +306,17 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
     step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
     step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
     t_safe = min(t_end, max_len) - 1e-6
-    k = 0
+    looking = True
     while True:
         if data[cy, cx] != FREE:
             return t, HIT
-        # the blocks looked up every fourth cell and a jump taken when it crosses a few
-        # cells at least (a cast through clutter pays little for them), with a margin inside
-        # the square: the jump's closed-form sums may round either way
-        k += 1
-        if (k & 3) == 1:
+        # a jump taken when it crosses a few cells at least, with a margin inside the
+        # square: the jump's closed-form sums may round either way
+        if looking:
             p = min(clear_exit(clear, shift, cx, cy, gx0, gy0, step_x, step_y, t_delta_x,
                                t_delta_y), t_safe) - 1e-6
-            if p > t + 6.0:
+            looking = p > t + 6.0
+            if looking:     # and look again from where it lands
                 kx, ky = steps_to(p, t_max_x, t_max_y, t_delta_x, t_delta_y)
                 if kx > 0:
                     t = max(t, t_max_x + (kx - 1) * t_delta_x)
@@ -324,7 +326,6 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
                     t = max(t, t_max_y + (ky - 1) * t_delta_y)
                     t_max_y += ky * t_delta_y
                     cy += ky * step_y
-                k = 0       # and look again from where it lands
         if t_max_x <= t_max_y:
             if t_max_x >= t_safe:
                 break

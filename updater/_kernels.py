@@ -1103,11 +1103,15 @@ def _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hit, reach, a, 
         n_ch, idx, n_x, n_y, t_max_x, t_max_y = _walk_cells_on(
             flat, enclosed, WALK_BLOCKED, idx, n_x, n_y, first - done, step_x, row_step,
             t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks, changed, n_ch)
-        n_ch = _walk_cells(flat, enclosed, later, idx, n_x, n_y, rest - first, step_x,
-                           row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
+        n_ch = _walk_cells(flat, enclosed, WALK_OPEN_UNKNOWN, idx, n_x, n_y, rest - first,
+                           step_x, row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
+                           changed, n_ch)
+    elif later == WALK_OPEN_UNKNOWN:    # each kind a loop of its own, with no test of it
+        n_ch = _walk_cells(flat, enclosed, WALK_OPEN_UNKNOWN, idx, n_x, n_y, rest - done,
+                           step_x, row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
                            changed, n_ch)
     else:
-        n_ch = _walk_cells(flat, enclosed, later, idx, n_x, n_y, rest - done, step_x,
+        n_ch = _walk_cells(flat, enclosed, WALK_BLOCKED, idx, n_x, n_y, rest - done, step_x,
                            row_step, t_delta_x, t_delta_y, t_max_x, t_max_y, ch_marks,
                            changed, n_ch)
     return n_ch, n_un

@@ -127,12 +127,10 @@ def time_scans(ref: OccupancyGrid, scans, passes: int = 3) -> dict:
             "lost": lost, "changed_cells": updater.n_changed, "state_bytes": updater.state_bytes()}
 
 
-# The kernels a scan goes through, by the step of docs/algorithm.md they belong to.
-PARTS = (("classifier: per-beam inputs (prepare_beams)", ("prepare_beams",)),
-         ("classifier: virtual beams cast, compared, run filter (classify_scan)",
-          ("classify_scan",)),
-         ("changed and unchanged flags (guard, walks, hit cells), then push and decide "
-          "(flag_push_decide)", ("flag_push_decide", "push_and_decide")))
+# The kernels a scan goes through: one call for a scan past the gate, and the pushes that
+# are left to calls of their own when the workspace lacks room.
+PARTS = (("classifier, flags (guard, walks, hit cells), push and decide in one call "
+          "(process_scan)", ("process_scan", "push_and_decide", "push_hits")),)
 
 
 def time_parts(ref: OccupancyGrid, scans) -> dict:
@@ -173,70 +171,89 @@ def time_parts(ref: OccupancyGrid, scans) -> dict:
 
 
 def time_inner(ref: OccupancyGrid, scans) -> dict:
-    """Mean time per scan [ms] of the heaviest work inside ``classify_scan`` and
-    ``flag_push_decide``, run again alone on each scan's recorded inputs, best of three
-    passes: the virtual beams' cast and the walks (each from the marks it met in the scan: the
-    free walks from the unchanged-flag marks of the settled free cells, the others from
-    none)."""
+    """Mean time per scan [ms] of the heaviest work inside ``process_scan``, run again alone
+    on each scan's recorded inputs, best of three passes: the classifier, of it the virtual
+    beams' cast, and the walks (each from the marks it met in the scan: the free walks from
+    the unchanged-flag marks of the settled free cells, the others from none)."""
+    import inspect
+
     from updater import steps
 
     kernels = steps.kernels()
     seen = []
-    originals = {name: getattr(kernels, name)
-                 for name in ("classify_scan", "flag_push_decide")}
+    original = kernels.process_scan
+    names = list(inspect.signature(original.py_func).parameters)
 
-    def record(name, fn):
-        def call(*args, **kwargs):
-            seen.append((name, args, {k: np.copy(v) if isinstance(v, np.ndarray) else v
-                                      for k, v in kwargs.items()}))
-            return fn(*args, **kwargs)
-        return call
+    def record(*args):
+        # the inputs as the call found them, the classifier's outputs as it left them
+        got = {k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in zip(names, args)}
+        out = original(*args)
+        seen.append(got | {k: np.copy(v) for k, v in zip(names, args) if k.startswith("out_")})
+        return out
 
     updater = MapUpdater(ref, UpdaterConfig(gating=False))
-    for name, fn in originals.items():
-        setattr(kernels, name, record(name, fn))
+    kernels.process_scan = record
     try:
         for scan, pose in scans:
             updater.process(scan, pose)
     finally:
-        for name, fn in originals.items():
-            setattr(kernels, name, fn)
+        kernels.process_scan = original
     run_inner(seen, kernels, ref)       # compile (or load the cache) first
     runs = [run_inner(seen, kernels, ref) for _ in range(3)]
     return {label: min(r[label] for r in runs) / len(scans) * 1e3 for label in runs[0]}
 
 
 def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
-    """The cast and the walks of ``time_inner``'s recorded calls: seconds in all, by part (the
-    free walks with the reckoning of where each may start)."""
-    spent = {"virtual beams cast (cast_virtual)": 0.0, "free walks (walk_beams)": 0.0,
+    """The classifier, the cast and the walks of ``time_inner``'s recorded calls: seconds in
+    all, by part (the free walks with the reckoning of where each may start)."""
+    spent = {"classifier (prepare_beams, classify_scan)": 0.0,
+             "virtual beams cast (cast_virtual)": 0.0, "free walks (walk_beams)": 0.0,
              "removed-obstacle walks (walk_beams)": 0.0}
     marks = np.zeros((ref.data.size + 7) // 8, np.uint8)
     out = np.zeros(ref.data.size + 1, np.int32)
-    for name, args, kw in seen:
-        if name == "classify_scan":
-            t0 = CLOCK()
-            kernels.cast_virtual(args[0], args[1], args[2], kw["virtual"], kw["max_len"],
-                                 kw["out_expected"], kw["out_found"])
-            spent["virtual beams cast (cast_virtual)"] += CLOCK() - t0
-            continue
-        skips = np.zeros(len(kw["hits"]))
+    for kw in seen:
+        t0 = CLOCK()
+        classify_alone(kernels, kw)
+        spent["classifier (prepare_beams, classify_scan)"] += CLOCK() - t0
+        t0 = CLOCK()
+        kernels.cast_virtual(kw["ref"], kw["clear"], kw["sensor"], kw["out_virtual"],
+                             kw["max_len"], kw["out_expected"], kw["out_found"])
+        spent["virtual beams cast (cast_virtual)"] += CLOCK() - t0
+        skips = np.zeros(len(kw["out_hits"]))
         for label, reach, want, drop, kind in (
-                ("free walks (walk_beams)", "free_reach", kernels.UNCHANGED, False,
+                ("free walks (walk_beams)", "out_free_reach", kernels.UNCHANGED, False,
                  kernels.WALK_FREE),
-                ("removed-obstacle walks (walk_beams)", "removed_reach", kernels.CHANGE, True,
+                ("removed-obstacle walks (walk_beams)", "out_reach", kernels.CHANGE, True,
                  kernels.WALK_BLOCKED)):
             marks[:] = kw["un_marks"] if kind == kernels.WALK_FREE else 0
             t0 = CLOCK()
             if kind == kernels.WALK_FREE:
-                kernels.free_walk_skips(kw["sensor"], kw["hits"], kw[reach], kw["verdict"],
-                                        want, kw["increment"], kw["wrap"], kw["cap"], skips)
-            kernels.walk_beams(args[0], marks, args[2], kw["sensor"], kw["hits"], kw[reach],
-                               select=kw["verdict"], want=want, drop_last=drop, cap=kw["cap"],
-                               kind=kind, marks=marks, out=out, n=0,
+                kernels.free_walk_skips(kw["sensor"], kw["out_hits"], kw[reach],
+                                        kw["out_verdict"], want, abs(kw["increment"]),
+                                        kw["even"], kw["cap"], skips)
+            kernels.walk_beams(kw["ref"], kw["enclosed"], kw["clear"], kw["sensor"],
+                               kw["out_hits"], kw[reach], select=kw["out_verdict"], want=want,
+                               drop_last=drop, cap=kw["cap"], kind=kind, marks=marks, out=out,
+                               n=0,
                                skip=skips if kind == kernels.WALK_FREE else kernels.NO_SKIPS)
             spent[label] += CLOCK() - t0
     return spent
+
+
+def classify_alone(kernels, kw) -> None:
+    """Step 1 of a recorded ``process_scan`` call (into its own copies of the outputs)."""
+    out = {k: v for k, v in kw.items() if k.startswith("out_")}
+    kernels.prepare_beams(kw["ranges"], kw["r_lo"], kw["r_hi"], kw["sensor"], kw["angle_min"],
+                          kw["step"], kw["increment"], kw["ratio"], kw["res"], kw["dist"],
+                          out["out_r"], out["out_valid"], out["out_virtual"],
+                          out["out_measured"], out["out_hits"], out["out_pairing"],
+                          out["out_tol"], out["out_skip"], out["out_reach"],
+                          out["out_free_reach"])
+    kernels.classify_scan(kw["ref"], kw["clear"], kw["sensor"], out["out_virtual"],
+                          kw["max_len"], out["out_hits"], out["out_valid"], out["out_pairing"],
+                          kw["half_window"], kw["wrap"], kw["min_run"], kw["n_skip"],
+                          out["out_expected"], out["out_found"], out["out_change"],
+                          out["out_keep"], out["out_verdict"], kw["min_width"])
 
 
 # --- before and after -------------------------------------------------------------------------
@@ -532,7 +549,8 @@ def print_table(rows, parts, inner, mem, scans_count: int) -> None:
     for label, ms in parts.items():
         print(f"| {label} | {ms:.3f} | {ms / total:.0%} |")
     for label, ms in inner.items():
-        print(f"| of which, run alone: {label} | {ms:.3f} | {ms / total:.0%} |")
+        print(f"| of which, run alone on the recorded inputs: {label} | {ms:.3f} "
+              f"| {ms / total:.0%} |")
     print()
     for beams in (720, 1440):
         small, large = (r for b, s, _, r in rows if b == beams)

@@ -1269,6 +1269,66 @@ def flag_push_decide(ref, enclosed, clear, sensor, hits, ranges, verdict, remove
     return n_ch, n_new, n_gaps, n_un, n_hits, d_changed, d_drawn, n_missing
 
 
+# What ``process_scan`` returns when the flag lists lack room for a scan's flags
+NEEDS_ROOM = -2
+
+
+@njit(cache=True)
+def process_scan(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, res, dist,
+                 out_r, out_valid, out_virtual, out_measured, out_hits, out_pairing, out_tol,
+                 out_skip, out_reach, out_free_reach, ref, clear, max_len, half_window, wrap,
+                 min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict,
+                 min_width, lost_fraction, walk_skipped, out_select, radius, unknown_guard,
+                 grow, short, gaps, margin, confirm_hits, cap, even, skips, ch_marks, un_marks,
+                 hit_marks, protected, hits_unknown, into, unknown_reach, scratch, changed,
+                 unchanged, hist, seen, decided, mask, threshold, few, support, moved, shift,
+                 full, directory, pool, used, drawn, missing, enclosed):
+    """A scan's whole way through the updater past the gate, in one call from Python (a call
+    costs a few µs, which a scan of 180 beams feels): ``prepare_beams`` and ``classify_scan``
+    (step 1), the lost check (``lost_fraction``, with ``known_changes``), then
+    ``flag_push_decide`` for a scan that is not lost, with the guard (``radius``) and the
+    hit surfaces' flags (``confirm_hits``) only when changes were kept, or (the guard) the
+    scan grows into the unknown. ``walk_skipped``: the skipped beams' removed-obstacle walks
+    run, their selection written to ``out_select``. The measured beams' own virtual beams
+    are every ``ratio``-th. Returns (valid beams, detected changes, changes kept by the run
+    filter, the bound on the scan's flags, then ``flag_push_decide``'s eight results); the
+    fifth is ``NEEDS_ROOM`` when ``changed`` and ``unchanged`` lack room for the bound (and
+    nothing was flagged), and -1 for a lost scan."""
+    n_valid, bound = prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio,
+                                   res, dist, out_r, out_valid, out_virtual, out_measured,
+                                   out_hits, out_pairing, out_tol, out_skip, out_reach,
+                                   out_free_reach)
+    raw, kept = classify_scan(ref, clear, sensor, out_virtual, max_len, out_hits, out_valid,
+                              out_pairing, half_window, wrap, min_run, n_skip, out_expected,
+                              out_found, out_change, out_keep, out_verdict, min_width)
+    n = ranges.shape[0]
+    bound = min(bound, ref.size) + n    # and room for an unchanged flag at each hit cell
+    head = (np.int64(n_valid), np.int64(raw), np.int64(kept), np.int64(bound))
+    if bound > changed.shape[0] or bound > unchanged.shape[0]:
+        return head + (NEEDS_ROOM, 0, 0, 0, 0, 0, 0, 0)
+    own = slice(0, n * ratio, ratio)
+    expected, direction, found = out_expected[own], out_virtual[own], out_found[own]
+    if n_valid > 0 and raw > lost_fraction * n_valid:
+        n_known, n_changes = known_changes(ref, expected, direction, found, out_r, out_change)
+        if n_known > 0 and n_changes > lost_fraction * n_known:
+            return head + (-1, 0, 0, 0, 0, 0, 0, 0)
+    select = out_verdict
+    if walk_skipped:
+        for i in range(n):
+            out_select[i] = CHANGE if out_verdict[i] == SKIPPED else out_verdict[i]
+        select = out_select
+    guard = radius if radius > 0.0 and (kept > 0 or grow) else 0.0
+    confirm = confirm_hits and kept > 0     # (a call this long takes no expression inside)
+    spacing = abs(increment)
+    return head + flag_push_decide(
+        ref, enclosed, clear, sensor, out_hits, out_r, out_verdict, select, out_reach, out_tol,
+        out_free_reach, expected, direction, found, guard, unknown_guard, grow, short, gaps,
+        margin, confirm, cap, spacing, even, skips, ch_marks, un_marks, hit_marks, protected,
+        hits_unknown, into, unknown_reach, scratch, changed, unchanged, hist, seen, decided,
+        mask, threshold, few, support, moved, shift, full, directory, pool, used, drawn,
+        missing)
+
+
 @njit(cache=True)
 def push_and_decide(hist, seen, ref, decided, changed, unchanged, mask, threshold, few,
                     support, width, ch_marks, un_marks, moved, shift=0, full=NEVER_SETTLED):

@@ -199,34 +199,27 @@ class MapUpdater:
             return ScanReport(t, status, reason, changed_cells=self._n_changed,
                               sensor_pose=placed)
 
-        beams = steps.classify_beams(ref, scan, sensor, res, cfg, ws, self._clear)
+        # the guard, fill_gaps, the growth into the unknown and the hits that confirm M's
+        # surfaces (flag_hit_surfaces) are not in the paper
+        n_valid, raw, kept, flags = steps.process_scan(
+            ref, scan, sensor, res, cfg, ws, self._clear,
+            (self._ch_marks, self._un_marks, self._hit_marks), self._enclosed,
+            (self._hist.reshape(-1), self._seen.reshape(-1), self._decided), self._hits,
+            self._drawn)
         self._counts["processed"] += 1
-        report = dict(valid_beams=beams.valid, detected_changes=beams.changes,
-                      raw_detected_changes=beams.raw_changes, verdicts=beams.verdict.copy(),
-                      sensor_pose=placed)
-        if steps.is_lost(beams, cfg, self._ref):
+        report = dict(valid_beams=n_valid, detected_changes=kept, raw_detected_changes=raw,
+                      verdicts=ws.verdict.copy(), sensor_pose=placed)
+        if flags is None:
             self._counts["lost"] += 1
             return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
-        n_ch, n_new, n_un = self._flag_push_decide(beams)
+        n_ch, n_new, n_un, d_changed, d_drawn = flags
+        self._n_changed += d_changed
+        self._n_drawn += d_drawn
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
         return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
                           new_obstacle_flags=n_new, unchanged_flags=n_un,
                           changed_cells=self._n_changed + self._n_drawn, **report)
-
-    def _flag_push_decide(self, beams) -> tuple[int, int, int]:
-        """Steps 2-3 and the buffers for a scan past the lost check: (changed flags,
-        new-obstacle flags, unchanged flags)."""
-        # the seen-surface guard, fill_gaps, the growth into the unknown and the hits that
-        # confirm M's surfaces (flag_hit_surfaces) are not in the paper
-        n_ch, n_new, n_un, d_changed, d_drawn = steps.flag_push_decide(
-            self._ref, beams, self.config, self._res,
-            (self._ch_marks, self._un_marks, self._hit_marks), self._enclosed, self._ws,
-            (self._hist.reshape(-1), self._seen.reshape(-1), self._decided), self._hits,
-            self._drawn)
-        self._n_changed += d_changed
-        self._n_drawn += d_drawn
-        return n_ch, n_new, n_un
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
         """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the

@@ -4,11 +4,11 @@
 steps of their own: ``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the
 changed-cells evaluator, ``fill_gaps`` after it, ``flag_hit_surfaces`` after the
 unchanged-cells evaluator, and the growth into the unknown (``list_unknown_hits``,
-``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``flag_push_decide``
-runs the steps from the guard to ``release_unknown_hits``, then the push, the decision and
-``push_hits``, in one kernel call, as ``MapUpdater`` does for every scan it processes: each
-kernel call from Python has a fixed cost, which a scan of a few hundred beams feels. ``close_outlines`` builds the output map on demand,
-``enclosed_unknown`` prepares the last check once per reference map.
+``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``process_scan``
+runs them all, from ``classify_beams`` to ``push_hits``, in one kernel call, as
+``MapUpdater`` does for every scan past the gate: each kernel call from Python has a fixed
+cost, which a scan of a few hundred beams feels. ``close_outlines`` builds the output map on
+demand, ``enclosed_unknown`` prepares the last check once per reference map.
 
 Each function takes the per-beam quantities from the classifier (computed in its kernel,
 with the same operations as the configuration's own methods, ``UpdaterConfig.pairing_distance``
@@ -91,6 +91,8 @@ class Workspace:
         self._layout = self._layout_cfg = None
         self._settings = self._settings_cfg = None
         self.missing_tiles = np.zeros(0, np.int64)
+        self.changed = np.zeros(0, np.int32)    # grown by the first scan that needs room
+        self.unchanged = np.zeros(0, np.int32)
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:
@@ -101,6 +103,7 @@ class Workspace:
             self.change = np.zeros(n, np.bool_)
             self.keep = np.zeros(n, np.bool_)
             self.verdict = np.zeros(n, np.int8)
+            self.select = np.zeros(n, np.int8)
             self.measured = np.zeros((n, 2), np.float64)
             self.into = np.zeros(n, np.bool_)
             self.scratch = np.zeros(n, np.bool_)
@@ -535,50 +538,55 @@ def decide_drawn(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, cfg: Up
                                       few=cfg.unanimous_min, drawn=drawn))
 
 
-# --- steps 2 and 3 and the buffers in one call ------------------------------------------------
-def flag_push_decide(ref: np.ndarray, beams: Beams, cfg: UpdaterConfig, res: float,
-                     marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
-                     ws: Workspace, buffers: tuple[np.ndarray, np.ndarray, np.ndarray],
-                     tiles: HitTiles, drawn: np.ndarray) -> tuple[int, int, int, int, int]:
-    """What ``guard_seen_surfaces``, ``list_unknown_hits`` (with ``grow_into_unknown``),
-    ``flag_changed_cells``, ``flag_unknown_seen_through``, ``release_seen_surfaces``,
-    ``fill_gaps``, ``flag_unchanged_cells``, ``flag_hit_surfaces`` and
-    ``release_unknown_hits`` do one after the other, then ``push_and_decide`` and
+# --- a scan past the gate in one call -----------------------------------------------------
+def process_scan(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
+                 cfg: UpdaterConfig, ws: Workspace, clear: np.ndarray,
+                 marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
+                 buffers: tuple[np.ndarray, np.ndarray, np.ndarray], tiles: HitTiles,
+                 drawn: np.ndarray) -> tuple[int, int, int, tuple[int, int, int, int, int] | None]:
+    """What ``classify_beams``, ``is_lost``, ``guard_seen_surfaces``, ``list_unknown_hits``
+    (with ``grow_into_unknown``), ``flag_changed_cells``, ``flag_unknown_seen_through``,
+    ``release_seen_surfaces``, ``fill_gaps``, ``flag_unchanged_cells``, ``flag_hit_surfaces``
+    and ``release_unknown_hits`` do one after the other, then ``push_and_decide`` and
     ``push_hits``, in one kernel call (``marks``: the changed-flag, unchanged-flag and hit
-    marks; ``buffers``: the flat buffers, counts and decided bits). The pushes are left to
-    calls of their own when the workspace lacks room for the scan's flags, or a hit cell its
-    tile. Returns (changed flags, new-obstacle and fill_gaps flags, unchanged flags, the
-    change of the number of changed cells, that of the drawn cells)."""
-    st = ws.settings(cfg, res)
-    guard = st.radius if st.radius > 0 and (beams.changes or cfg.grow_into_unknown) else 0.0
-    ws.for_protected(min(beams.hits.shape[0] * st.side * st.side, ref.size) if guard else 0)
-    ws.for_unknown_hits(beams.hits.shape[0])
-    missing = ws.for_missing_tiles(beams.hits.shape[0])
-    ch_marks, un_marks, hit_marks = marks
-    hist, seen, decided = buffers
-    n_ch, n_new, n_gaps, n_un, n_hits, d_changed, d_drawn, n_missing = \
-        kernels().flag_push_decide(
-            ref, enclosed, beams.clear, sensor=beams.sensor, hits=beams.hits,
-            ranges=beams.ranges, verdict=beams.verdict, removed_select=removed_select(beams, cfg),
-            removed_reach=removed_reach(beams), tol=beams.tol, free_reach=beams.free_reach,
-            expected=beams.own_expected, directions=beams.own_direction, found=beams.own_found,
-            guard=guard, unknown_guard=st.unknown_guard, grow=cfg.grow_into_unknown,
-            short=st.short, gaps=st.gaps, margin=cfg.fill_gaps_free_margin,
-            confirm=bool(cfg.confirm_hit_surfaces and beams.changes), cap=ws.cells.shape[1],
-            increment=beams.increment, wrap=beams.wrap, skips=ws.skips, ch_marks=ch_marks,
-            un_marks=un_marks, hit_marks=hit_marks, protected=ws.protected,
-            hits_unknown=ws.hits_unknown, into=ws.into, unknown_reach=ws.unknown_reach,
-            scratch=ws.scratch, changed=ws.changed, unchanged=ws.unchanged, hist=hist,
-            seen=seen, decided=decided, mask=st.mask, threshold=cfg.threshold,
-            few=cfg.unanimous_min, support=st.support, moved=ws.moved, shift=st.shift,
-            full=st.full, directory=tiles.directory, pool=tiles.pool, used=tiles.count,
-            drawn=drawn, missing=missing)
+    marks; ``buffers``: the flat buffers, counts and decided bits; ``clear``: M's
+    ``clear_blocks``). The call is made again when the workspace lacks room for the scan's
+    flags (it then flags nothing); the pushes are left to calls of their own when it lacks
+    room for the flags' entries, or a hit cell its tile. Returns (valid beams, detected
+    changes, changes kept by the run filter, then None for a lost scan, else (changed
+    flags, new-obstacle and fill_gaps flags, unchanged flags, the change of the number of
+    changed cells, that of the drawn cells)); the classifier's arrays stay in ``ws``."""
+    k, lay, st, n = kernels(), ws.layout(scan, cfg, res), ws.settings(cfg, res), scan.beams
+    ws.for_protected(min(n * st.side * st.side, ref.size) if st.radius > 0 else 0)
+    ws.for_unknown_hits(n)
+    missing = ws.for_missing_tiles(n)
+    (ch_marks, un_marks, hit_marks), (hist, seen, decided) = marks, buffers
+    while True:
+        got = k.process_scan(
+            scan.ranges, float(scan.range_min), lay.r_hi, sensor, scan.angle_min, lay.step,
+            scan.angle_increment, cfg.virtual_to_measured_ratio, res, st.dist, ws.r, ws.valid,
+            ws.virtual, ws.measured, ws.hits, ws.pairing, ws.tol, ws.skip, ws.reach,
+            ws.free_reach, ref, clear, lay.max_len, lay.half, lay.wrap, cfg.min_run, cfg.n_skip,
+            ws.expected, ws.found, ws.change, ws.keep, ws.verdict, cfg.min_run_width / res,
+            cfg.lost_fraction, cfg.walk_skipped_beams, ws.select, st.radius, st.unknown_guard,
+            cfg.grow_into_unknown, st.short, st.gaps, cfg.fill_gaps_free_margin,
+            cfg.confirm_hit_surfaces, ws.cells.shape[1], lay.even, ws.skips, ch_marks,
+            un_marks, hit_marks, ws.protected, ws.hits_unknown, ws.into, ws.unknown_reach,
+            ws.scratch, ws.changed, ws.unchanged, hist, seen, decided, st.mask, cfg.threshold,
+            cfg.unanimous_min, st.support, ws.moved, st.shift, st.full, tiles.directory,
+            tiles.pool, tiles.count, drawn, missing, enclosed)
+        if got[4] != k.NEEDS_ROOM:
+            break
+        ws.for_flags(got[3])
+    n_valid, raw, kept, _, n_ch, n_new, n_gaps, n_un, n_hits, d_changed, d_drawn, n_missing = got
+    if n_ch < 0:
+        return n_valid, raw, kept, None
     if n_missing < 0:           # no room for the flags' entries: the pushes, one by one
         d_changed = push_and_decide(hist, seen, ref.reshape(-1), decided, n_ch, n_un,
                                     ref.shape[1], cfg, res, ch_marks, un_marks, ws)
     if n_missing != 0 and cfg.grow_into_unknown:
         d_drawn = push_hits(tiles, ref, enclosed, n_hits, n_ch, cfg, res, hit_marks, drawn, ws)
-    return int(n_ch), int(n_new + n_gaps), int(n_un), int(d_changed), int(d_drawn)
+    return n_valid, raw, kept, (n_ch, n_new + n_gaps, n_un, d_changed, d_drawn)
 
 
 def removed_select(beams: Beams, cfg: UpdaterConfig) -> np.ndarray:

@@ -185,10 +185,11 @@ def time_inner(ref: OccupancyGrid, scans) -> dict:
     names = list(inspect.signature(original.py_func).parameters)
 
     def record(*args):
-        # the inputs as the call found them, the classifier's outputs as it left them
+        # the inputs as the call found them, the per-beam arrays as it left them
         got = {k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in zip(names, args)}
         out = original(*args)
-        seen.append(got | {k: np.copy(v) for k, v in zip(names, args) if k.startswith("out_")})
+        left = {k: np.copy(v) for k, v in zip(names, args) if k in PER_BEAM}
+        seen.append(got | left | beam_views(left))
         return out
 
     updater = MapUpdater(ref, UpdaterConfig(gating=False))
@@ -216,23 +217,23 @@ def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
         classify_alone(kernels, kw)
         spent["classifier (prepare_beams, classify_scan)"] += CLOCK() - t0
         t0 = CLOCK()
-        kernels.cast_virtual(kw["ref"], kw["clear"], kw["sensor"], kw["out_virtual"],
-                             kw["max_len"], kw["out_expected"], kw["out_found"])
+        kernels.cast_virtual(kw["ref"], kw["clear"], kw["sensor"], kw["virtual"],
+                             kw["max_len"], kw["expected"], kw["out_found"])
         spent["virtual beams cast (cast_virtual)"] += CLOCK() - t0
-        skips = np.zeros(len(kw["out_hits"]))
+        skips = np.zeros(len(kw["hits"]))
         for label, reach, want, drop, kind in (
-                ("free walks (walk_beams)", "out_free_reach", kernels.UNCHANGED, False,
+                ("free walks (walk_beams)", "free_reach", kernels.UNCHANGED, False,
                  kernels.WALK_FREE),
-                ("removed-obstacle walks (walk_beams)", "out_reach", kernels.CHANGE, True,
+                ("removed-obstacle walks (walk_beams)", "reach", kernels.CHANGE, True,
                  kernels.WALK_BLOCKED)):
             marks[:] = kw["un_marks"] if kind == kernels.WALK_FREE else 0
             t0 = CLOCK()
             if kind == kernels.WALK_FREE:
-                kernels.free_walk_skips(kw["sensor"], kw["out_hits"], kw[reach],
-                                        kw["out_verdict"], want, abs(kw["increment"]),
-                                        kw["even"], kw["cap"], skips)
+                kernels.free_walk_skips(kw["sensor"], kw["hits"], kw[reach], kw["verdict"],
+                                        want, abs(kw["increment"]), kw["even"], kw["cap"],
+                                        skips)
             kernels.walk_beams(kw["ref"], kw["enclosed"], kw["clear"], kw["sensor"],
-                               kw["out_hits"], kw[reach], select=kw["out_verdict"], want=want,
+                               kw["hits"], kw[reach], select=kw["verdict"], want=want,
                                drop_last=drop, cap=kw["cap"], kind=kind, marks=marks, out=out,
                                n=0,
                                skip=skips if kind == kernels.WALK_FREE else kernels.NO_SKIPS)
@@ -240,20 +241,32 @@ def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
     return spent
 
 
+# ``process_scan``'s per-beam arguments: rows of these, named by ``Workspace``
+PER_BEAM = ("floats", "bits", "verdicts", "points", "rays", "out_found")
+
+
+def beam_views(arrays: dict) -> dict:
+    """The per-beam arrays of ``process_scan``'s arguments by name (views of their rows)."""
+    from updater.steps import Workspace as W
+
+    views = {}
+    for names, key in ((W.FLOATS, "floats"), (W.BITS, "bits"), (W.VERDICTS, "verdicts"),
+                       (W.POINTS, "points"), (W.RAYS, "rays")):
+        views.update(zip(names, arrays[key]))
+    return views
+
+
 def classify_alone(kernels, kw) -> None:
-    """Step 1 of a recorded ``process_scan`` call (into its own copies of the outputs)."""
-    out = {k: v for k, v in kw.items() if k.startswith("out_")}
+    """Step 1 of a recorded ``process_scan`` call (into its recorded outputs)."""
     kernels.prepare_beams(kw["ranges"], kw["r_lo"], kw["r_hi"], kw["sensor"], kw["angle_min"],
                           kw["step"], kw["increment"], kw["ratio"], kw["res"], kw["dist"],
-                          out["out_r"], out["out_valid"], out["out_virtual"],
-                          out["out_measured"], out["out_hits"], out["out_pairing"],
-                          out["out_tol"], out["out_skip"], out["out_reach"],
-                          out["out_free_reach"])
-    kernels.classify_scan(kw["ref"], kw["clear"], kw["sensor"], out["out_virtual"],
-                          kw["max_len"], out["out_hits"], out["out_valid"], out["out_pairing"],
-                          kw["half_window"], kw["wrap"], kw["min_run"], kw["n_skip"],
-                          out["out_expected"], out["out_found"], out["out_change"],
-                          out["out_keep"], out["out_verdict"], kw["min_width"])
+                          kw["r"], kw["valid"], kw["virtual"], kw["measured"], kw["hits"],
+                          kw["pairing"], kw["tol"], kw["skip"], kw["reach"], kw["free_reach"])
+    kernels.classify_scan(kw["ref"], kw["clear"], kw["sensor"], kw["virtual"], kw["max_len"],
+                          kw["hits"], kw["valid"], kw["pairing"], kw["half_window"],
+                          kw["wrap"], kw["min_run"], kw["n_skip"], kw["expected"],
+                          kw["out_found"], kw["change"], kw["keep"], kw["verdict"],
+                          kw["min_width"])
 
 
 # --- before and after -------------------------------------------------------------------------

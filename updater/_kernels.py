@@ -1275,25 +1275,27 @@ NEEDS_ROOM = -2
 
 @njit(cache=True)
 def process_scan(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, res, dist,
-                 out_r, out_valid, out_virtual, out_measured, out_hits, out_pairing, out_tol,
-                 out_skip, out_reach, out_free_reach, ref, clear, max_len, half_window, wrap,
-                 min_run, n_skip, out_expected, out_found, out_change, out_keep, out_verdict,
-                 min_width, lost_fraction, walk_skipped, out_select, radius, unknown_guard,
-                 grow, short, gaps, margin, confirm_hits, cap, even, skips, ch_marks, un_marks,
-                 hit_marks, protected, hits_unknown, into, unknown_reach, scratch, changed,
-                 unchanged, hist, seen, decided, mask, threshold, few, support, moved, shift,
-                 full, directory, pool, used, drawn, missing, enclosed):
+                 floats, bits, verdicts, points, rays, out_found, ref, clear, max_len,
+                 half_window, wrap, min_run, n_skip, min_width, lost_fraction, walk_skipped,
+                 radius, unknown_guard, grow, short, gaps, margin, confirm_hits, cap, even,
+                 ch_marks, un_marks, hit_marks, protected, hits_unknown, changed, unchanged,
+                 hist, seen, decided, mask, threshold, few, support, moved, shift, full,
+                 directory, pool, used, drawn, missing, enclosed):
     """A scan's whole way through the updater past the gate, in one call from Python (a call
     costs a few µs, which a scan of 180 beams feels): ``prepare_beams`` and ``classify_scan``
     (step 1), the lost check (``lost_fraction``, with ``known_changes``), then
     ``flag_push_decide`` for a scan that is not lost, with the guard (``radius``) and the
     hit surfaces' flags (``confirm_hits``) only when changes were kept, or (the guard) the
-    scan grows into the unknown. ``walk_skipped``: the skipped beams' removed-obstacle walks
-    run, their selection written to ``out_select``. The measured beams' own virtual beams
-    are every ``ratio``-th. Returns (valid beams, detected changes, changes kept by the run
-    filter, the bound on the scan's flags, then ``flag_push_decide``'s eight results); the
-    fifth is ``NEEDS_ROOM`` when ``changed`` and ``unchanged`` lack room for the bound (and
-    nothing was flagged), and -1 for a lost scan."""
+    scan grows into the unknown. The per-beam arrays come as rows of ``floats``, ``bits``,
+    ``verdicts``, ``points`` and ``rays`` (``_beam_rows``); ``walk_skipped``: the skipped
+    beams' removed-obstacle walks run. The measured beams' own virtual beams are every
+    ``ratio``-th. ``hist`` and ``seen`` are the map's shape. Returns (valid beams, detected
+    changes, changes kept by the run filter, the bound on the scan's flags, then
+    ``flag_push_decide``'s eight results); the fifth is ``NEEDS_ROOM`` when ``changed`` and
+    ``unchanged`` lack room for the bound (and nothing was flagged), -1 for a lost scan."""
+    out_r, out_pairing, out_tol, out_skip, out_reach, out_free_reach, unknown_reach, skips, \
+        out_valid, out_change, out_keep, into, scratch, out_verdict, out_select, out_hits, \
+        out_measured, out_virtual, out_expected = _beam_rows(floats, bits, verdicts, points, rays)
     n_valid, bound = prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio,
                                    res, dist, out_r, out_valid, out_virtual, out_measured,
                                    out_hits, out_pairing, out_tol, out_skip, out_reach,
@@ -1319,14 +1321,23 @@ def process_scan(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, 
         select = out_select
     guard = radius if radius > 0.0 and (kept > 0 or grow) else 0.0
     confirm = confirm_hits and kept > 0     # (a call this long takes no expression inside)
-    spacing = abs(increment)
+    spacing, flat_hist, flat_seen = abs(increment), hist.reshape(-1), seen.reshape(-1)
     return head + flag_push_decide(
         ref, enclosed, clear, sensor, out_hits, out_r, out_verdict, select, out_reach, out_tol,
         out_free_reach, expected, direction, found, guard, unknown_guard, grow, short, gaps,
         margin, confirm, cap, spacing, even, skips, ch_marks, un_marks, hit_marks, protected,
-        hits_unknown, into, unknown_reach, scratch, changed, unchanged, hist, seen, decided,
-        mask, threshold, few, support, moved, shift, full, directory, pool, used, drawn,
+        hits_unknown, into, unknown_reach, scratch, changed, unchanged, flat_hist, flat_seen,
+        decided, mask, threshold, few, support, moved, shift, full, directory, pool, used, drawn,
         missing)
+
+
+@njit(cache=True, inline="always")
+def _beam_rows(floats, bits, verdicts, points, rays):
+    """``process_scan``'s per-beam arrays, by name: the rows in the order of ``Workspace``'s
+    ``FLOATS``, ``BITS``, ``VERDICTS``, ``POINTS`` and ``RAYS`` (``updater.steps``)."""
+    return (floats[0], floats[1], floats[2], floats[3], floats[4], floats[5], floats[6],
+            floats[7], bits[0], bits[1], bits[2], bits[3], bits[4], verdicts[0], verdicts[1],
+            points[0], points[1], rays[0], rays[1])
 
 
 @njit(cache=True)

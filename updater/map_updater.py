@@ -204,22 +204,20 @@ class MapUpdater:
         n_valid, raw, kept, flags = steps.process_scan(
             ref, scan, sensor, res, cfg, ws, self._clear,
             (self._ch_marks, self._un_marks, self._hit_marks), self._enclosed,
-            (self._hist.reshape(-1), self._seen.reshape(-1), self._decided), self._hits,
-            self._drawn)
+            (self._hist, self._seen, self._decided), self._hits, self._drawn)
         self._counts["processed"] += 1
-        report = dict(valid_beams=n_valid, detected_changes=kept, raw_detected_changes=raw,
-                      verdicts=ws.verdict.copy(), sensor_pose=placed)
         if flags is None:
             self._counts["lost"] += 1
-            return ScanReport(t, ScanStatus.LOST, changed_cells=self._n_changed, **report)
+            return ScanReport(t, ScanStatus.LOST, "", n_valid, kept, raw,
+                              changed_cells=self._n_changed, verdicts=ws.verdict.copy(),
+                              sensor_pose=placed)
         n_ch, n_new, n_un, d_changed, d_drawn = flags
         self._n_changed += d_changed
         self._n_drawn += d_drawn
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
-        return ScanReport(t, ScanStatus.PROCESSED, changed_flags=n_ch,
-                          new_obstacle_flags=n_new, unchanged_flags=n_un,
-                          changed_cells=self._n_changed + self._n_drawn, **report)
+        return ScanReport(t, ScanStatus.PROCESSED, "", n_valid, kept, raw, n_ch, n_new, n_un,
+                          self._n_changed + self._n_drawn, ws.verdict.copy(), placed)
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
         """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the

@@ -50,6 +50,7 @@ DIRECTION_BINS = int(round(360.0 / DIRECTION_BIN_DEG))
 _CENTRES = (np.arange(DIRECTION_BINS) + 0.5) * DIRECTION_BIN_DEG
 _EVERY_DIRECTION = np.ones(DIRECTION_BINS, bool)
 _ALL_BINS = list(range(DIRECTION_BINS))
+_TWICE = _ALL_BINS * 2
 
 
 def _sees(k: int, degrees: float, half: float) -> bool:
@@ -62,7 +63,8 @@ def _sees(k: int, degrees: float, half: float) -> bool:
 def bins_seen(heading: float, fov_deg: float) -> list[int]:
     """The bins ``directions_seen`` sets, as a list of indices (each once, in no order). A scan
     sees an arc of bins, so only the bins at its ends are put to the test (a NumPy pass over
-    every bin cost a scan more than the rest of the gate)."""
+    every bin cost a scan more than the rest of the gate), and the arc is a slice of the
+    bins laid out twice."""
     if fov_deg >= 360.0:
         return _ALL_BINS
     degrees, half = math.degrees(heading), fov_deg / 2.0
@@ -70,15 +72,18 @@ def bins_seen(heading: float, fov_deg: float) -> list[int]:
     if not _sees(own, degrees, half) and not _sees(own - 1, degrees, half) \
             and not _sees(own + 1, degrees, half):
         return [own]        # an arc narrower than a bin, between two centres
-    lo = math.floor((degrees - half) / DIRECTION_BIN_DEG - 0.5)
-    hi = math.ceil((degrees + half) / DIRECTION_BIN_DEG - 0.5)
     # the bounds are a bin out at most either way: the test decides
-    lo = next(k for k in range(lo - 1, lo + 3) if _sees(k, degrees, half))
-    hi = next(k for k in range(hi + 1, hi - 3, -1) if _sees(k, degrees, half))
+    lo = math.floor((degrees - half) / DIRECTION_BIN_DEG - 0.5) - 1
+    while not _sees(lo, degrees, half):
+        lo += 1
+    hi = math.ceil((degrees + half) / DIRECTION_BIN_DEG - 0.5) + 1
+    while not _sees(hi, degrees, half):
+        hi -= 1
     if hi - lo >= DIRECTION_BINS - 2:     # the ends meet behind the scan: test every bin
         return [k for k in _ALL_BINS if k == own or _sees(k, degrees, half)]
-    seen = [k % DIRECTION_BINS for k in range(lo, hi + 1)]
-    return seen if own in seen else seen + [own]
+    start = lo % DIRECTION_BINS
+    seen = _TWICE[start:start + hi - lo + 1]
+    return seen if (own - lo) % DIRECTION_BINS <= hi - lo else seen + [own]
 
 
 def directions_seen(heading: float, fov_deg: float) -> np.ndarray:

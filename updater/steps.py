@@ -1,14 +1,15 @@
 """The steps of docs/algorithm.md, one function each, in the order a scan goes through them:
 ``classify_beams`` -> ``is_lost`` -> ``flag_changed_cells`` -> ``flag_unchanged_cells`` ->
-``push_flags`` -> ``decide`` (``push_and_decide``: the two in one call). The rules that are not in the paper are
-steps of their own: ``guard_seen_surfaces`` (undone by ``release_seen_surfaces``) around the
-changed-cells evaluator, ``fill_gaps`` after it, ``flag_hit_surfaces`` after the
-unchanged-cells evaluator, and the growth into the unknown (``list_unknown_hits``,
-``flag_unknown_seen_through``, ``release_unknown_hits``, ``push_hits``). ``process_scan``
-runs them all, from ``classify_beams`` to ``push_hits``, in one kernel call, as
-``MapUpdater`` does for every scan past the gate: each kernel call from Python has a fixed
-cost, which a scan of a few hundred beams feels. ``close_outlines`` builds the output map on
-demand, ``enclosed_unknown`` prepares the last check once per reference map.
+``push_flags`` -> ``decide`` (``push_and_decide``: the two in one call). The rules that are
+not in the paper are steps of their own: ``guard_seen_surfaces`` (undone by
+``release_seen_surfaces``) around the changed-cells evaluator, ``fill_gaps`` after it,
+``flag_hit_surfaces`` after the unchanged-cells evaluator, and the growth into the unknown
+(``list_unknown_hits``, ``flag_unknown_seen_through``, ``release_unknown_hits``,
+``push_hits``). ``process_scan`` runs them all, from ``classify_beams`` to ``push_hits``, in
+one kernel call, as ``MapUpdater`` does for every scan past the gate: each kernel call from
+Python has a fixed cost, which a scan of a few hundred beams feels. ``close_outlines`` builds
+the output map on demand, ``enclosed_unknown`` prepares the last check once per reference
+map.
 
 Each function takes the per-beam quantities from the classifier (computed in its kernel,
 with the same operations as the configuration's own methods, ``UpdaterConfig.pairing_distance``
@@ -542,7 +543,7 @@ def decide_drawn(tiles: HitTiles, ref: np.ndarray, enclosed: np.ndarray, cfg: Up
                                       few=cfg.unanimous_min, drawn=drawn))
 
 
-# --- a scan past the gate in one call -----------------------------------------------------
+# --- a scan past the gate in one call -------------------------------------------------------------
 def process_scan(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
                  cfg: UpdaterConfig, ws: Workspace, clear: np.ndarray,
                  marks: tuple[np.ndarray, np.ndarray, np.ndarray], enclosed: np.ndarray,
@@ -554,12 +555,13 @@ def process_scan(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     and ``release_unknown_hits`` do one after the other, then ``push_and_decide`` and
     ``push_hits``, in one kernel call (``marks``: the changed-flag, unchanged-flag and hit
     marks; ``buffers``: the buffers and counts, of the map's shape, and the decided bits;
-    ``clear``: M's ``clear_blocks``). The call is made again when the workspace lacks room for the scan's
-    flags (it then flags nothing); the pushes are left to calls of their own when it lacks
-    room for the flags' entries, or a hit cell its tile. Returns (valid beams, detected
-    changes, changes kept by the run filter, then None for a lost scan, else (changed
-    flags, new-obstacle and fill_gaps flags, unchanged flags, the change of the number of
-    changed cells, that of the drawn cells)); the classifier's arrays stay in ``ws``."""
+    ``clear``: M's ``clear_blocks``). The call is made again when the workspace lacks room
+    for the scan's flags (it then flags nothing); the pushes are left to calls of their own
+    when it lacks room for the flags' entries, or a hit cell its tile. Returns (valid beams,
+    detected changes, changes kept by the run filter, then None for a lost scan, else
+    (changed flags, new-obstacle and fill_gaps flags, unchanged flags, the change of the
+    number of changed cells, that of the drawn cells)); the classifier's arrays stay in
+    ``ws``."""
     k, lay, st, n = kernels(), ws.layout(scan, cfg, res), ws.settings(cfg, res), scan.beams
     ws.for_protected(min(n * st.side * st.side, ref.size) if st.radius > 0 else 0)
     ws.for_unknown_hits(n)

@@ -331,6 +331,20 @@ def known_changes(ref, expected, directions, found, ranges, change):
     return n_known, n_changes
 
 
+
+@njit(cache=True)
+def scan_is_lost(ref, expected, directions, found, ranges, change, n_valid, raw, lost_fraction):
+    """Whether a classified scan is dropped as lost: more than ``lost_fraction`` of its
+    ``n_valid`` valid beams are changes (``raw``, before the run filter), the pose is probably
+    wrong. A beam that is a change because it looks into unknown space says nothing of the
+    pose (docs/algorithm.md, a partly mapped place), so such a scan is dropped only if the
+    beams whose expected ray ends in known space are changes past ``lost_fraction`` too
+    (``known_changes``). Never more scans than the paper's rule: that is asked first."""
+    if not (n_valid > 0 and raw > lost_fraction * n_valid):
+        return False
+    n_known, n_changes = known_changes(ref, expected, directions, found, ranges, change)
+    return n_known > 0 and n_changes > lost_fraction * n_known
+
 # --- walks along beams ------------------------------------------------------------------------
 # A walk's cells listed (``walk``), then flagged (``flag_free_listed``, ``flag_occupied_listed``):
 # the plain form of what ``walk_beams`` does in one pass, kept to check it against.
@@ -1283,7 +1297,7 @@ def process_scan(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, 
                  directory, pool, used, drawn, missing, enclosed):
     """A scan's whole way through the updater past the gate, in one call from Python (a call
     costs a few µs, which a scan of 180 beams feels): ``prepare_beams`` and ``classify_scan``
-    (step 1), the lost check (``lost_fraction``, with ``known_changes``), then
+    (step 1), the lost check (``scan_is_lost``), then
     ``flag_push_decide`` for a scan that is not lost, with the guard (``radius``) and the
     hit surfaces' flags (``confirm_hits``) only when changes were kept, or (the guard) the
     scan grows into the unknown. The per-beam arrays come as rows of ``floats``, ``bits``,
@@ -1310,10 +1324,9 @@ def process_scan(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio, 
         return head + (NEEDS_ROOM, 0, 0, 0, 0, 0, 0, 0)
     own = slice(0, n * ratio, ratio)
     expected, direction, found = out_expected[own], out_virtual[own], out_found[own]
-    if n_valid > 0 and raw > lost_fraction * n_valid:
-        n_known, n_changes = known_changes(ref, expected, direction, found, out_r, out_change)
-        if n_known > 0 and n_changes > lost_fraction * n_known:
-            return head + (-1, 0, 0, 0, 0, 0, 0, 0)
+    if scan_is_lost(ref, expected, direction, found, out_r, out_change, n_valid, raw,
+                    lost_fraction):
+        return head + (-1, 0, 0, 0, 0, 0, 0, 0)
     select = out_verdict
     if walk_skipped:
         for i in range(n):

@@ -316,16 +316,11 @@ def classify_beams(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
 
 def is_lost(beams: Beams, cfg: UpdaterConfig, ref: np.ndarray) -> bool:
     """More than ``lost_fraction`` of the valid beams disagree with the map (counted before the
-    run filter): the pose is probably wrong, so the scan is dropped. A beam that is a change
-    because it looks into unknown space says nothing of the pose (docs/algorithm.md, a partly
-    mapped place), so such a scan is dropped only if the beams whose expected ray ends in
-    known space are changes past ``lost_fraction`` too. (Never more scans than the paper's
-    rule: that is asked first, and costs nothing.)"""
-    if not (beams.valid > 0 and beams.raw_changes > cfg.lost_fraction * beams.valid):
-        return False
-    n_known, n_changes = kernels().known_changes(ref, beams.own_expected, beams.own_direction,
-                                                 beams.own_found, beams.ranges, beams.change)
-    return n_known > 0 and n_changes > cfg.lost_fraction * n_known
+    run filter): the pose is probably wrong, so the scan is dropped (``scan_is_lost``, whose
+    rule ``process_scan`` applies too)."""
+    return bool(kernels().scan_is_lost(ref, beams.own_expected, beams.own_direction,
+                                       beams.own_found, beams.ranges, beams.change, beams.valid,
+                                       beams.raw_changes, cfg.lost_fraction))
 
 
 # --- not in the paper: the seen-surface guard -------------------------------------------------
@@ -592,14 +587,6 @@ def process_scan(ref: np.ndarray, scan: Scan, sensor: np.ndarray, res: float,
     if n_missing != 0 and cfg.grow_into_unknown:
         d_drawn = push_hits(tiles, ref, enclosed, n_hits, n_ch, cfg, res, hit_marks, drawn, ws)
     return n_valid, raw, kept, (n_ch, n_new + n_gaps, n_un, d_changed, d_drawn)
-
-
-def removed_select(beams: Beams, cfg: UpdaterConfig) -> np.ndarray:
-    """The beams whose removed-obstacle walk runs: those whose verdict is CHANGE in the array
-    returned. With ``walk_skipped_beams`` the skipped beams beside a kept change walk too."""
-    if not cfg.walk_skipped_beams:
-        return beams.verdict
-    return np.where(beams.verdict == SKIPPED, np.int8(CHANGE), beams.verdict)
 
 
 def removed_reach(beams: Beams) -> np.ndarray:

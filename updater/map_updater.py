@@ -75,11 +75,11 @@ class ScanStatus(enum.Enum):
     REFUSED = "refused"       # not processed: the pose check refused the pose
 
 
-@dataclass(frozen=True, eq=False, slots=True)
+@dataclass(eq=False, slots=True)
 class ScanReport:
-    """What one call of ``MapUpdater.process`` did. (Slots: a frozen dataclass sets each
-    field through ``object.__setattr__``, and with a dictionary besides that took twice as
-    long, for a report made at every scan.)"""
+    """What one call of ``MapUpdater.process`` did. (Slots, and not frozen: a frozen
+    dataclass sets each field through ``object.__setattr__``, which took 1.6 µs a report
+    against 0.3, for a report made at every scan.)"""
 
     time: float                    # [s] the scan's time
     status: ScanStatus

@@ -408,7 +408,7 @@ NO_BLOCKS = np.zeros((0, 0), np.uint8)
 NO_SKIPS = np.zeros(0, np.float64)
 NO_ENTRIES = np.zeros((0, 2), np.float64)
 # [grid units] a beam's walks that flag no free cell start this far short of where its expected
-# ray entered unknown space (``walk_scan``): the walk's segment and the ray agree but for
+# ray met a cell that is not free (``walk_scan``): the walk's segment and the ray agree but for
 # rounding
 ENTRY_MARGIN = 2.0
 # ``settled``'s bound past every buffer: none is settled
@@ -1044,11 +1044,11 @@ def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
     those of the walks one after the other, up to the order of the lists and to the cells
     where a segment passes within about 1e-12 of a corner (the shorter walk's cells are taken
     as the first ones of the longer). ``skips``: ``free_walk_skips``, used by the beams that
-    walk free space only. ``entered`` (an empty array: none): per beam, the point where its
-    expected ray entered unknown space (``expected`` of a beam that ``unknown_walks`` sends
-    there); a beam whose walks flag no free cell (into unknown space, with or without a
-    removed-obstacle walk) starts ``ENTRY_MARGIN`` short of it, as every cell its ray crossed
-    before lies free. Returns (n_ch, n_un)."""
+    walk free space only. ``entered`` (an empty array: none): per beam, where its expected
+    ray met the first cell of M that is not free, or ended (``expected``); a beam whose walks
+    flag no free cell (a removed-obstacle walk, a walk into unknown space, or both) starts
+    ``ENTRY_MARGIN`` short of it, as every cell its ray crossed before lies free. Returns
+    (n_ch, n_un)."""
     height, width = ref.shape
     flat = ref.reshape(-1)
     gx0, gy0 = sensor[0], sensor[1]
@@ -1067,7 +1067,7 @@ def walk_scan(ref, enclosed, clear, sensor, hits, removed_select, removed_reach,
             if second > first:
                 reach = unknown_reach[i]
         late = skips[i] if f and not u else 0.0
-        if u and not f and entered.shape[0] > 0:
+        if not f and entered.shape[0] > 0:
             late = max(math.sqrt((entered[i, 0] - gx0) ** 2 + (entered[i, 1] - gy0) ** 2)
                        - ENTRY_MARGIN, 0.0)
         n_ch, n_un = _walk_phases(flat, enclosed, clear, width, height, gx0, gy0, hits[i],

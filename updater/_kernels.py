@@ -629,29 +629,36 @@ def mark_seen_surfaces(ref, enclosed, hits, verdict, radius, unknown_radius, mar
     what stays unknown next to a freed cell. ``need``: only the hits of the beams it selects
     (``guard_needed``). Returns the count listed."""
     height, width = ref.shape
+    flat = ref.reshape(-1)
     n = 0
+    last = out.shape[0] - 1     # each cell visited is written there, and counted if marked
+    if last < 0:
+        return 0
     r2 = radius * radius
     u2 = unknown_radius * unknown_radius
     for i in range(hits.shape[0]):
         if verdict[i] == INVALID or (need is not None and not need[i]):
             continue
         x, y = hits[i, 0], hits[i, 1]
+        c0, c1 = max(int(np.floor(x - radius)), 0), min(int(np.floor(x + radius)) + 1, width)
         for row in range(max(int(np.floor(y - radius)), 0),
                          min(int(np.floor(y + radius)) + 1, height)):
             dy = max(row - y, 0.0, y - row - 1.0)
-            for col in range(max(int(np.floor(x - radius)), 0),
-                             min(int(np.floor(x + radius)) + 1, width)):
-                v = ref[row, col]
+            for idx in range(row * width + c0, row * width + c1):
+                v = flat[idx]
                 if v == FREE:
                     continue
+                # no branch on the others: which of them to mark is anyone's guess
+                col = idx - row * width
                 dx = max(col - x, 0.0, x - col - 1.0)
-                idx = row * width + col
-                if dx * dx + dy * dy > (r2 if v == OCCUPIED else u2) or \
-                        (v != OCCUPIED and bit_get(enclosed, idx)):
-                    continue
-                if test_and_set(marks, idx):
-                    out[n] = idx
-                    n += 1
+                occupied = v == OCCUPIED
+                take = (dx * dx + dy * dy <= (r2 if occupied else u2)) & \
+                    (occupied | (bit_get(enclosed, idx) == 0))
+                b, bit = idx >> 3, np.uint8(1 << (idx & 7))
+                old = marks[b]
+                marks[b] = old | (bit if take else np.uint8(0))
+                out[min(n, last)] = idx
+                n += take & ((old & bit) == 0)
     return n
 
 

@@ -331,7 +331,6 @@ def known_changes(ref, expected, directions, found, ranges, change):
     return n_known, n_changes
 
 
-
 @njit(cache=True)
 def scan_is_lost(ref, expected, directions, found, ranges, change, n_valid, raw, lost_fraction):
     """Whether a classified scan is dropped as lost: more than ``lost_fraction`` of its
@@ -344,6 +343,7 @@ def scan_is_lost(ref, expected, directions, found, ranges, change, n_valid, raw,
         return False
     n_known, n_changes = known_changes(ref, expected, directions, found, ranges, change)
     return n_known > 0 and n_changes > lost_fraction * n_known
+
 
 # --- walks along beams ------------------------------------------------------------------------
 # A walk's cells listed (``walk``), then flagged (``flag_free_listed``, ``flag_occupied_listed``):
@@ -1645,7 +1645,8 @@ def apply_changes(ref, decided, enclosed, width, close, hist, out, mask=0xFFFF):
     that became free that lies in an enclosed unknown region of ``ref`` and is itself unchanged
     (so still unknown) becomes occupied, unless ``hist`` (flat buffers, or an empty array;
     the flags are its ``mask`` bits) holds a changed flag for it: a cell seen through, if not
-    yet often enough to be freed, is left unknown rather than drawn. Returns the count of cells the last check closed."""
+    yet often enough to be freed, is left unknown rather than drawn. Returns the count of
+    cells the last check closed."""
     height = ref.shape[0] // width
     closed = 0
     for b in range(decided.shape[0]):

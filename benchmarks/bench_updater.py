@@ -247,13 +247,9 @@ PER_BEAM = ("floats", "bits", "verdicts", "points", "rays", "out_found")
 
 def beam_views(arrays: dict) -> dict:
     """The per-beam arrays of ``process_scan``'s arguments by name (views of their rows)."""
-    from updater.steps import Workspace as W
+    from updater.steps import Workspace
 
-    views = {}
-    for names, key in ((W.FLOATS, "floats"), (W.BITS, "bits"), (W.VERDICTS, "verdicts"),
-                       (W.POINTS, "points"), (W.RAYS, "rays")):
-        views.update(zip(names, arrays[key]))
-    return views
+    return {name: row for key, names in Workspace.ROWS for name, row in zip(names, arrays[key])}
 
 
 def classify_alone(kernels, kw) -> None:

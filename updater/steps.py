@@ -102,6 +102,9 @@ class Workspace:
     VERDICTS = ("verdict", "select")
     POINTS = ("hits", "measured")        # (n, 2) each
     RAYS = ("virtual", "expected")       # (m, 2) each, per virtual beam
+    # each array of rows, by its attribute, and the names of its rows
+    ROWS = (("floats", FLOATS), ("bits", BITS), ("verdicts", VERDICTS), ("points", POINTS),
+            ("rays", RAYS))
 
     def for_beams(self, n: int, m: int, walk: int) -> None:
         if n != self._beams:
@@ -110,9 +113,8 @@ class Workspace:
             self.bits = np.zeros((len(self.BITS), n), np.bool_)
             self.verdicts = np.zeros((len(self.VERDICTS), n), np.int8)
             self.points = np.zeros((len(self.POINTS), n, 2), np.float64)
-            for names, rows in ((self.FLOATS, self.floats), (self.BITS, self.bits),
-                                (self.VERDICTS, self.verdicts), (self.POINTS, self.points)):
-                for name, row in zip(names, rows):
+            for key, names in self.ROWS[:-1]:     # the rays: per virtual beam, below
+                for name, row in zip(names, getattr(self, key)):
                     setattr(self, name, row)
         if m != self._virtual:
             self._virtual = m

@@ -234,26 +234,55 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
                              scan_topics=log.scan_topics, odom_topic=log.odom_topic,
                              pose_topic=log.pose_topic, truth_topic=log.truth_topic,
                              laser_mount=log.laser_mount)
-    source = _choose_source(place.source, found.has, log.path, place.initial_pose is not None)
-    updater, state_loaded = _updater(grid, updater_config, state_path, method)
-    pipeline = _pipeline(updater, place.pose_check, place.pose_check_config,
-                         _smoother(place.smooth_window, source, found.has))
-    starter = None
-    if source == "localizer":
-        starter = LocalizerStart(grid, place, found.has["map_frame"])
-    replay = _replay(pipeline, found, source, starter, (log.start_time, log.end_time),
-                     f"updating from {Path(log.path).name}" if progress else None)
-    _check_placed(pipeline, replay, found, log.path)
-    updated = _save_outputs(updater, replay, outputs)
+    done = replay_observations(grid, found, place, method=method, updater_config=updater_config,
+                               state_path=state_path, window=(log.start_time, log.end_time),
+                               log_path=log.path, progress=progress)
+    updated = _save_outputs(done.updater, done.replay, outputs)
     return {
         "log": str(log.path), "format": found.format, "map": str(map_path),
         "out": str(outputs.map), "state": None if state_path is None else str(state_path),
-        "state_loaded": state_loaded, "method": method, "pose_source": source,
-        **_what_happened(pipeline, replay, found), **_changes(grid, updated),
-        "evidence": _evidence(updater),
+        "state_loaded": done.state_loaded, "method": method, "pose_source": done.source,
+        **_what_happened(done.pipeline, done.replay, found), **_changes(grid, updated),
+        "evidence": _evidence(done.updater),
         "trajectory": None if outputs.trajectory is None else str(outputs.trajectory),
         "wall_s": _time.perf_counter() - wall0,
     }
+
+
+@dataclass
+class ReplayRun:
+    """What a replay made: the method that updated the map (its ``updated_map()`` is the
+    result), the pipeline with its counters, what the replay loop gathered, the pose source it
+    used and whether the updater was loaded from a state file."""
+
+    updater: object
+    pipeline: RobotPipeline
+    replay: Replay
+    source: str
+    state_loaded: bool
+
+
+def replay_observations(grid: OccupancyGrid, found, placement: Placement = Placement(), *,
+                        method: str = "paper", updater_config=None, state_path=None,
+                        window=(None, None), log_path="log", progress: bool = False
+                        ) -> ReplayRun:
+    """The update of ``grid`` from a log's observations ``found`` (a
+    ``robotlogs.LogObservations``, or anything with its ``observations``, ``total`` and
+    ``has``), placed as ``placement`` says, within ``window`` (start, end [s], None for
+    open); nothing is written. ``update_from_log`` is this with the log read and the outputs
+    saved."""
+    source = _choose_source(placement.source, found.has, log_path,
+                            placement.initial_pose is not None)
+    updater, state_loaded = _updater(grid, updater_config, state_path, method)
+    pipeline = _pipeline(updater, placement.pose_check, placement.pose_check_config,
+                         _smoother(placement.smooth_window, source, found.has))
+    starter = None
+    if source == "localizer":
+        starter = LocalizerStart(grid, placement, found.has["map_frame"])
+    replay = _replay(pipeline, found, source, starter, window,
+                     f"updating from {Path(log_path).name}" if progress else None)
+    _check_placed(pipeline, replay, found, log_path)
+    return ReplayRun(updater, pipeline, replay, source, state_loaded)
 
 
 def _what_happened(pipeline: RobotPipeline, replay: Replay, found) -> dict:

@@ -253,7 +253,10 @@ def beam_verdicts(valid, keep, n_skip, wrap, out_verdict):
 # The range-dependent distances' parameters, in this order, as ``UpdaterConfig`` names them.
 DISTANCES = ("pairing_distance_near", "pairing_range_near", "pairing_distance_slope",
              "pairing_distance_max", "radius_near", "radius_far", "radius_far_range",
-             "removed_skip_fraction", "removed_skip_min", "free_fraction")
+             "removed_skip_fraction", "removed_skip_min", "free_fraction", "removed_skip_across")
+# The smallest sine of the angle between a beam and the surface it hits that ``skip_across``
+# divides by: a beam that grazes a surface more closely walks no less than a tenth of the way.
+MIN_INCIDENCE_SINE = 0.1
 
 
 @njit(cache=True)
@@ -291,7 +294,37 @@ def prepare_beams(ranges, r_lo, r_hi, sensor, angle_min, step, increment, ratio,
         measured = out_measured
     n_valid, walked, box = beam_endpoints(out_r, out_valid, sensor, measured, res, out_hits)
     beam_distances(out_r, res, dist, out_pairing, out_tol, out_skip, out_reach, out_free_reach)
+    if dist[10] > 0.0:
+        skip_across(out_r, out_valid, out_hits, sensor, out_skip, out_reach, ranges.shape[0])
     return n_valid, min(walked, box)
+
+
+@njit(cache=True)
+def skip_across(ranges, valid, hits, sensor, out_skip, out_reach, n):
+    """The removed-obstacle skip measured across the surface each beam hits rather than along
+    the beam: divided by the sine of the angle between the beam and that surface (the line
+    through the hits of the beam's valid neighbours, or of the beam and its one valid
+    neighbour), at least ``MIN_INCIDENCE_SINE``. A beam that grazes a wall ends its walk as far
+    from the wall as one that meets it square, so a pose a few centimetres off across the wall
+    does not walk the beam through the wall's face. A beam with no valid neighbour keeps its
+    skip. ``n``: the scan's beams (the first rows of the arrays)."""
+    for i in range(n):
+        if not valid[i]:
+            continue
+        a = i - 1 if i > 0 and valid[i - 1] else i
+        b = i + 1 if i + 1 < n and valid[i + 1] else i
+        if a == b:
+            continue
+        tx, ty = hits[b, 0] - hits[a, 0], hits[b, 1] - hits[a, 1]
+        dx, dy = hits[i, 0] - sensor[0], hits[i, 1] - sensor[1]
+        norm = math.sqrt((tx * tx + ty * ty) * (dx * dx + dy * dy))
+        if not norm > 0.0:
+            continue
+        sine = max(abs(dx * ty - dy * tx) / norm, MIN_INCIDENCE_SINE)
+        out_skip[i] = out_skip[i] / sine
+        reach = 1.0 - out_skip[i] / ranges[i]
+        # (a reach within rounding of 0 would put the walk's end on the sensor)
+        out_reach[i] = reach if reach > 1e-6 else 0.0
 
 
 @njit(cache=True)
@@ -1707,6 +1740,41 @@ def spread_freed(ref, decided, hist, seen, width, mask, shift, max_cells, spread
                                                  shift, stack[top], spread, stack, top)
                 marked += added
     return marked
+
+
+@njit(cache=True)
+def keep_beside_standing(ref, bits, hist, seen, width, mask, shift, out):
+    """``out`` (a copy of ``bits``): the bits cleared of the occupied cells of ``ref`` (flat)
+    beside something that stands: an 8-neighbour occupied in ``ref`` whose bit is clear, or
+    unknown in ``ref`` and never flagged (no beam has passed through it or ended in it). What
+    is freed next to such a cell is a sliver of a face a beam grazed, or a face a pose error
+    wore, not an object that went: the cells of a removed object go together, and its
+    interior is seen through with it. Returns the count cleared."""
+    size = ref.shape[0]
+    height = size // width
+    cleared = 0
+    for b in range(bits.shape[0]):
+        if bits[b] == 0:
+            continue
+        for idx in range(b * 8, min(b * 8 + 8, size)):
+            if not bit_get(bits, idx) or ref[idx] != OCCUPIED:
+                continue
+            row, col = idx // width, idx % width
+            standing = False
+            for rr in range(max(row - 1, 0), min(row + 2, height)):
+                for cc in range(max(col - 1, 0), min(col + 2, width)):
+                    j = rr * width + cc
+                    if j == idx:
+                        continue
+                    if ref[j] == OCCUPIED and not bit_get(bits, j):
+                        standing = True
+                    elif ref[j] == UNKNOWN and hist[j] & mask == 0 and \
+                            flag_count(hist, seen, j, shift) == 0:
+                        standing = True
+            if standing:
+                out[idx >> 3] &= np.uint8(~(1 << (idx & 7)) & 0xFF)
+                cleared += 1
+    return cleared
 
 
 @njit(cache=True)

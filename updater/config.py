@@ -90,6 +90,11 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
+    # Not in the paper (_kernels.skip_across): that skip measured across the surface the beam
+    # hits, not along the beam (the skip over the sine of the angle between beam and surface,
+    # from the hits of the beam's neighbours). A beam grazing a wall at 10 deg otherwise walks
+    # to within 3 cm of it across, and a pose that far off walks it through the wall's face.
+    removed_skip_across: bool = False
     # Not in the paper (steps.guard_seen_surfaces): an occupied cell of M (or an unknown one
     # outside the enclosed regions) within this distance of the hit point of any valid beam of
     # the scan (a surface the scan sees) gets no removed-obstacle flag from that scan. Under a
@@ -147,6 +152,13 @@ class UpdaterConfig:
     spread_removed: bool = False
     spread_max_area: float = 1.0             # [m^2] of occupied cells: larger structures of M
                                              # (walls) get no spread
+    # Not in the paper (steps.keep_beside_standing): an occupied cell of M is freed only if
+    # none of its 8-neighbours stands: occupied in M and kept occupied by the output, or
+    # unknown in M and reached by no flag. A face cell that an object covers by a sliver,
+    # grazed by beams that pass through the rest of it, and a wall cell worn by a pose a few
+    # centimetres off, each stand beside cells that stay; the cells of an object that went go
+    # together, its interior seen through with them. Applied to the output map.
+    free_with_neighbours: bool = False
     # --- Last check ---------------------------------------------------------------------------
     last_check: bool = True
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
@@ -155,7 +167,8 @@ class UpdaterConfig:
         for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
                      "last_check", "fill_gaps",
                      "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams",
-                     "spread_removed", "support_exact_state"):
+                     "spread_removed", "support_exact_state", "free_with_neighbours",
+                     "removed_skip_across"):
             if not isinstance(getattr(self, name), bool):
                 raise UpdaterError(f"config key '{name}' must be true or false, "
                                    f"got {getattr(self, name)!r}")

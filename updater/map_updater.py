@@ -313,12 +313,16 @@ class MapUpdater:
         return OccupancyGrid(cells, self._res, self._origin)
 
     def _output_bits(self) -> np.ndarray:
-        """The decided bits, with the cells freed with their objects (``spread_removed``)."""
-        if not self.config.spread_removed:
-            return self._decided
-        return self._decided | steps.spread_freed(self._hist.reshape(-1), self._seen.reshape(-1),
-                                                  self._ref.reshape(-1), self._decided,
-                                                  self._ref.shape[1], self._res, self.config)
+        """The decided bits, with the cells freed with their objects (``spread_removed``) and
+        without those beside a surface that stands (``free_with_neighbours``)."""
+        bits = self._decided
+        if self.config.spread_removed:
+            bits = bits | steps.spread_freed(self._hist.reshape(-1), self._seen.reshape(-1),
+                                             self._ref.reshape(-1), self._decided,
+                                             self._ref.shape[1], self._res, self.config)
+        return steps.keep_beside_standing(self._hist.reshape(-1), self._seen.reshape(-1),
+                                          self._ref.reshape(-1), bits, self._ref.shape[1],
+                                          self.config)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the cells the decision rule marks changed, in row-major order.

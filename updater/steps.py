@@ -729,6 +729,19 @@ def spread_freed(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndar
     return spread
 
 
+def keep_beside_standing(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
+                         bits: np.ndarray, width: int, cfg: UpdaterConfig) -> np.ndarray:
+    """``bits`` (the cells the output changes) without the occupied cells of M beside an
+    occupied cell of M the output keeps, or beside an unknown cell of M that no flag reached
+    (``cfg.free_with_neighbours``); ``bits`` itself when the rule is off."""
+    if not cfg.free_with_neighbours:
+        return bits
+    out = bits.copy()
+    kernels().keep_beside_standing(ref_flat, bits, hist_flat, seen_flat, width=width,
+                                   mask=buffer_mask(cfg), shift=count_shift(cfg), out=out)
+    return out
+
+
 def close_outlines(ref: np.ndarray, decided: np.ndarray, enclosed: np.ndarray,
                    last_check: bool, drawn: np.ndarray | None = None,
                    seen_through: np.ndarray | None = None,

@@ -37,11 +37,11 @@ pass over a log, a new session with the same check) ends the hold; ``reset`` end
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from gridmap import OccupancyGrid, Pose2D, PoseVerdict, Scan
+from gridmap import UNKNOWN, OccupancyGrid, Pose2D, PoseVerdict, Scan
 from gridmap.config import check_bounds, config_from_dict, config_from_yaml, config_to_dict
 from gridmap.distance import distance_to_occupied
 
@@ -91,6 +91,11 @@ class PoseCheckConfig:
     max_position_std: float = 0.15      # [m] sqrt of the largest eigenvalue of the x-y covariance
     max_yaw_std_deg: float = 5.0        # [deg]
     retry_interval: float = 0.3         # [s] of scan time a refusal holds without a new fit; 0: off
+    # Score only the beams whose end point, at the given pose, lies in a known cell of the map
+    # or within ``cap`` of an occupied one. A beam that ends where the map knows nothing (a
+    # part of the place the map has not seen yet) is drawn to the nearest mapped surface as
+    # the pose moves, and tilts the fit towards a pose that is not better.
+    known_ends_only: bool = False
     # ``verdict`` hands the updater, for a trusted pose, the best fit near it (``refine``),
     # polished on a grid of +-polish_steps steps of these sizes each way
     refine: bool = True
@@ -196,6 +201,8 @@ class PoseCheck:
         # The kernel sums table entries: the negative squared residual, so higher is better.
         self._table = np.ascontiguousarray(-(residual * residual), dtype=np.float32)
         self._residual = np.ascontiguousarray(residual, dtype=np.float32)
+        # where a beam may end to be scored with ``known_ends_only``
+        self._scored = (grid.data != UNKNOWN) | (residual < 1.0)
         self._frame = np.array([grid.origin[0], grid.origin[1], grid.resolution])
         self._grids = (
             SearchGrid(c.fine_step, c.fine_steps, math.radians(c.fine_step_deg),
@@ -221,7 +228,26 @@ class PoseCheck:
         """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
         ``sensor_mount`` (robot frame), and the best pose of the search grids around it; None
         when the scan has no valid beam."""
-        return self._fit(select_beams(scan, self.config.max_beams), robot_pose, sensor_mount)
+        return self._fit(self._beams(scan, robot_pose, sensor_mount), robot_pose, sensor_mount)
+
+    def _beams(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D):
+        """The scan's beams the check scores: ``max_beams`` of them, evenly spread, and with
+        ``known_ends_only`` those that end in known space at ``robot_pose``."""
+        beams = select_beams(scan, self.config.max_beams)
+        if not self.config.known_ends_only or beams.count == 0:
+            return beams
+        sensor = robot_pose.compose(sensor_mount)
+        c, s = math.cos(sensor.theta), math.sin(sensor.theta)
+        x = sensor.x + c * beams.points[:, 0] - s * beams.points[:, 1]
+        y = sensor.y + s * beams.points[:, 0] + c * beams.points[:, 1]
+        ox, oy, res = self._frame
+        col = np.floor((x - ox) / res).astype(np.int64)
+        row = np.floor((y - oy) / res).astype(np.int64)
+        h, w = self._scored.shape
+        inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        keep = np.zeros(beams.count, bool)
+        keep[inside] = self._scored[row[inside], col[inside]]
+        return replace(beams, points=np.ascontiguousarray(beams.points[keep]))
 
     def _fit(self, beams, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
         """``fit`` with the scan's beams already selected."""
@@ -272,7 +298,7 @@ class PoseCheck:
         from such poses land a cell or two off and are then, being within the pairing
         distance of the truth, never corrected (docs/choices.md)."""
         c = self.config
-        beams = select_beams(scan, c.max_beams)     # selected once for the check and the polish
+        beams = self._beams(scan, robot_pose, sensor_mount)   # once for the check and the polish
         reason, f = self._check(scan, robot_pose, sensor_mount, cov, beams)
         if reason:
             return reason
@@ -350,7 +376,7 @@ class PoseCheck:
                     cov[2, 2] > math.radians(c.max_yaw_std_deg) ** 2:
                 return UNSURE_COVARIANCE, None
         if beams is None:
-            beams = select_beams(scan, c.max_beams)
+            beams = self._beams(scan, robot_pose, sensor_mount)
         f = self._fit(beams, robot_pose, sensor_mount)
         if f is None:
             return "", None

@@ -53,7 +53,7 @@ def one_case(job):
     from gridmap import load_map
     from robotlogs import log_observations
     from robot.logmap import map_from_log
-    from robot.replay import LogSource, Outputs, update_from_log
+    from robot.replay import LogSource, Outputs, Placement, update_from_log
     from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from updater import UpdaterConfig
 
@@ -67,6 +67,10 @@ def one_case(job):
     case = make_case(load_map(map_path), log_observations(log).observations, seed,
                      removed=4, added=4, people=people)
     write_case(case, case_dir, map_path=map_path, log_path=log)
+    overrides = dict(overrides)
+    check = bool(overrides.pop("pose_check", False))
+    from localization.confidence import PoseCheckConfig
+    pc = PoseCheckConfig(**{k[3:]: overrides.pop(k) for k in list(overrides) if k.startswith("pc.")})
     robot = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
     rows = []
     for method in methods:
@@ -74,7 +78,7 @@ def one_case(job):
                "authors_gate": UpdaterConfig(grow_into_unknown=True)}.get(method, robot)
         out = case_dir / f"out-{method}.yaml"
         s = update_from_log(case_dir / "stale.yaml", LogSource(case_dir / "log.clf"),
-                            Outputs(out), updater_config=cfg,
+                            Outputs(out), Placement(pose_check=check, pose_check_config=pc), updater_config=cfg,
                             method=method if method in ("hybrid", "fuse") else "paper")
         sc = score_case(case_dir, load_map(out))
         rows.append({"log": name, "seed": seed, "people": people, "method": method,
@@ -132,7 +136,7 @@ def partly_mapped(job):
     from gridmap import load_map, save_map
     from gridmap.mapping import build_map
     from robotlogs.carmen import read_carmen
-    from robot.replay import LogSource, Outputs, update_from_log
+    from robot.replay import LogSource, Outputs, Placement, update_from_log
     from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from updater import UpdaterConfig
 
@@ -146,9 +150,14 @@ def partly_mapped(job):
     lines = gzip.open(log, "rt", errors="replace").read().splitlines()
     laser = [i for i, line in enumerate(lines) if line.startswith(("FLASER", "ROBOTLASER"))]
     (work / f"{name}-rest.log").write_text("\n".join(lines[laser[cut]:]) + "\n")
+    overrides = dict(overrides)
+    check = bool(overrides.pop("pose_check", False))
+    from localization.confidence import PoseCheckConfig
+    pc = PoseCheckConfig(**{k[3:]: overrides.pop(k) for k in list(overrides) if k.startswith("pc.")})
     cfg = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **overrides})
     s = update_from_log(work / f"{name}-part.yaml", LogSource(work / f"{name}-rest.log"),
-                        Outputs(work / f"{name}-grown.yaml"), updater_config=cfg)
+                        Outputs(work / f"{name}-grown.yaml"), Placement(pose_check=check, pose_check_config=pc),
+                        updater_config=cfg)
     rest = [(r.scan, r.laser_pose) for r in scans[cut:]]
     g = growth_scores(before, load_map(work / f"{name}-grown.yaml"), whole,
                       observed_counts(before, rest, cfg.max_range),

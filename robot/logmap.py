@@ -30,10 +30,12 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
                  start_time: float | None = None, end_time: float | None = None,
                  log_format: str | None = None, strict: bool = False, scan_topics=None,
                  odom_topic=None, pose_topic=None, truth_topic=None,
-                 laser_mount: Pose2D | None = None, params=None, progress: bool = True) -> dict:
+                 laser_mount: Pose2D | None = None, params=None, limits=None,
+                 progress: bool = True) -> dict:
     """Build a map from the scans of ``log_path`` (those within ``start_time`` / ``end_time``
     [s, log time] when given) and save it as ``out_path``; returns a summary. ``params``: a
-    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1)."""
+    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1); ``limits``: what a
+    CARMEN log may hold (``robotlogs.LogLimits``)."""
     wall0 = _time.perf_counter()
     if pose_source not in MAP_SOURCES:
         raise LogError(f"the map's poses must be one of {', '.join(MAP_SOURCES)}, got "
@@ -46,7 +48,7 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
     found = log_observations(log_path, log_format=log_format, strict=strict,
                              scan_topics=scan_topics, odom_topic=odom_topic,
                              pose_topic=pose_topic, truth_topic=truth_topic,
-                             laser_mount=laser_mount)
+                             laser_mount=laser_mount, limits=limits)
     if not found.has["recorded" if pose_source == "recorded" else "truth"]:
         raise LogError(f"{log_path}: no {'corrected' if pose_source == 'recorded' else 'true'} "
                        "poses to map with (a map needs a log whose poses are right; a raw log "

@@ -49,7 +49,7 @@ from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
 from localization.tracking import TrackingMonitor
-from robotlogs import LogError, Observation, log_observations
+from robotlogs import LogError, LogLimits, Observation, log_observations
 from robotlogs.tum import write_tum
 from updater import MapUpdater, ScanStatus, UpdaterConfig
 
@@ -167,8 +167,9 @@ class LogSource:
     """Where the log is and how to read it: ``path`` (a ROS 1 bag, a ROS 2 bag folder or a
     CARMEN log), its ``format`` (None: detected), ``strict`` (a malformed line or message is
     an error instead of a counted skip), the topics of a bag (None: found), ``laser_mount``
-    (None: the log's), and ``start_time`` / ``end_time`` [s, log time] that limit the scans
-    used."""
+    (None: the log's), ``start_time`` / ``end_time`` [s, log time] that limit the scans
+    used, and ``limits``: what a CARMEN log may hold, and whether one cut short is read
+    (``robotlogs.LogLimits``; None: its defaults)."""
 
     path: Path
     format: str | None = None
@@ -180,6 +181,7 @@ class LogSource:
     laser_mount: Pose2D | None = None
     start_time: float | None = None
     end_time: float | None = None
+    limits: LogLimits | None = None
 
 
 @dataclass(frozen=True)
@@ -233,7 +235,7 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
     found = log_observations(log.path, log_format=log.format, strict=log.strict,
                              scan_topics=log.scan_topics, odom_topic=log.odom_topic,
                              pose_topic=log.pose_topic, truth_topic=log.truth_topic,
-                             laser_mount=log.laser_mount)
+                             laser_mount=log.laser_mount, limits=log.limits)
     source = _choose_source(place.source, found.has, log.path, place.initial_pose is not None)
     updater, state_loaded = _updater(grid, updater_config, state_path, method)
     pipeline = _pipeline(updater, place.pose_check, place.pose_check_config,

@@ -1,0 +1,185 @@
+"""Hostile input, round four: the command line's last few. A start pose off the map's free
+floor, absurd numbers in a log, a gzip log cut short or holding gigabytes of comment lines, a
+study whose run folder leads out of it, a damaged updater state, YAML bombs. Each case gives
+its exact input and checks the exact line, the exit code, and that nothing was written (or,
+where the input is usable, what was read of it)."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gridmap import OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan, load_map, save_map
+from gridmap.mapping import LogOddsMapper
+from mapupdate import main
+
+try:
+    import ros2_tools
+    import synthetic_room as world
+    from test_reliability_files import BOX, flaser_lines
+    from test_reliability_hostile import BILLION_LAUGHS, refused, time_limit
+except ImportError:  # tests collected as a package
+    from tests import ros2_tools
+    from tests import synthetic_room as world
+    from tests.test_reliability_files import BOX, flaser_lines
+    from tests.test_reliability_hostile import BILLION_LAUGHS, refused, time_limit
+
+START = Pose2D(8.5, 5.5, 1.5707963267948966)        # where the robot of the room's log starts
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    """The room's map with the box, and a log of the robot circling it (100 FLASER lines)."""
+    d = tmp_path_factory.mktemp("room")
+    save_map(world.rasterise(world.room_walls() + [BOX]), d / "map.yaml")
+    poses = [true for true, _, _ in world.Drive(seconds=10, rate=10.0).steps()]
+    assert poses[0] == START
+    (d / "run.log").write_text("\n".join(flaser_lines(poses, [0.1 * k for k in range(100)]))
+                               + "\n")
+    return d
+
+
+def copy_room(room: Path, folder: Path) -> Path:
+    """The room's map and log in a folder of the test's own, whose files the checks watch."""
+    folder.mkdir()
+    for f in room.iterdir():
+        (folder / f.name).write_bytes(f.read_bytes())
+    return folder
+
+
+def ran(args, capsys) -> list[str]:
+    """``mapupdate ARGS`` exits 0; its stdout lines."""
+    capsys.readouterr()
+    with time_limit(120):
+        code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return out.splitlines()
+
+
+# --- 3. a gzip log cut short -------------------------------------------------------------------
+@pytest.fixture()
+def cut_log(room, tmp_path):
+    """The room's log gzipped and cut in half; (folder, the cut file, complete lines before the
+    cut, their bytes, the bytes of the line the cut went through), the last three found by
+    inflating the cut file here."""
+    d = copy_room(room, tmp_path / "f")
+    packed = gzip.compress((d / "run.log").read_bytes(), mtime=0)
+    cut = d / "run.clf.gz"
+    cut.write_bytes(packed[:len(packed) // 2])
+    text = zlib.decompressobj(31).decompress(cut.read_bytes())
+    kept = text.rfind(b"\n") + 1
+    return d, cut, text.count(b"\n"), kept, len(text) - kept
+
+
+def test_a_gzip_log_cut_in_half_is_read_up_to_the_cut(cut_log, capsys):
+    d, cut, complete, kept, dropped = cut_log
+    assert 30 < complete < 70 and dropped > 0
+    lines = ran(["update", "--map", d / "map.yaml", "--log", cut, "--out", d / "o.yaml",
+                 "--no-progress"], capsys)
+    warning = (f"  warning: {cut} is cut short: its gzip stream ends without its end marker "
+               f"after {complete} complete lines ({kept} bytes of text); read up to the cut: "
+               f"the {dropped} bytes of the line it cut through are dropped, and whatever "
+               "followed it is lost")
+    assert [line for line in lines if "cut short" in line] == [warning]
+    assert lines[1].startswith(f"  {complete} scans read, {complete} used;")
+    # the same map as the complete lines give, written as a plain log
+    whole = (d / "run.log").read_text().splitlines(keepends=True)
+    (d / "part.log").write_text("".join(whole[:complete]))
+    ran(["update", "--map", d / "map.yaml", "--log", d / "part.log", "--out", d / "p.yaml",
+         "--no-progress"], capsys)
+    assert np.array_equal(load_map(d / "o.yaml").data, load_map(d / "p.yaml").data)
+    lines = ran(["map", "--log", cut, "--out", d / "m.yaml", "--no-progress"], capsys)
+    assert lines[1] == f"  {complete} of {complete} scans mapped (poses: recorded)"
+    assert lines[2] == warning
+
+
+@pytest.mark.parametrize("flag", ["--refuse-truncated", "--strict"])
+def test_a_cut_gzip_log_is_refused_on_request(cut_log, capsys, flag):
+    d, cut, complete, kept, _ = cut_log
+    for command in (["update", "--map", d / "map.yaml"], ["map"]):
+        err = refused([*command, "--log", cut, "--out", d / "o.yaml", flag, "--no-progress"],
+                      inputs=d, capsys=capsys, outputs=[d / "o.yaml", d / "o.pgm"])
+        assert err == (f"mapupdate {command[0]}: error: {cut} is cut short: its gzip stream "
+                       f"ends without its end marker after {complete} complete lines ({kept} "
+                       "bytes of text); refused (--refuse-truncated or --strict; without them "
+                       "a cut log is read up to the cut)")
+
+
+def test_a_gzip_log_damaged_inside_is_still_refused(room, tmp_path, capsys):
+    d = copy_room(room, tmp_path / "f")
+    packed = bytearray(gzip.compress((d / "run.log").read_bytes(), mtime=0))
+    packed[len(packed) // 2] ^= 0xFF
+    (d / "bad.clf.gz").write_bytes(bytes(packed))
+    err = refused(["update", "--map", d / "map.yaml", "--log", d / "bad.clf.gz", "--out",
+                   d / "o.yaml", "--no-progress"], inputs=d, capsys=capsys,
+                  outputs=[d / "o.yaml"])
+    assert err.startswith(f"mapupdate update: error: {d / 'bad.clf.gz'}: cannot read: ")
+
+
+# --- 4. gigabytes of comment lines in a small gzip file --------------------------------------
+def test_a_gzip_log_of_270_million_comment_lines_is_refused_within_seconds(room, tmp_path,
+                                                                           capsys):
+    d = copy_room(room, tmp_path / "f")
+    member = gzip.compress(b"# comment\n" * 10_000, mtime=0)    # 100 KB in 243 bytes
+    bomb = d / "comments.clf.gz"
+    bomb.write_bytes(member * 27_000)            # 6.6 MB: 270 million lines, 2.7 GB of text
+    size = bomb.stat().st_size
+    t0 = time.perf_counter()
+    err = refused(["update", "--map", d / "map.yaml", "--log", bomb, "--out", d / "o.yaml",
+                   "--no-progress"], inputs=d, capsys=capsys, outputs=[d / "o.yaml"])
+    # a line per 4 bytes of the file: 1.6 million lines (1 s to read), not 270 million
+    assert time.perf_counter() - t0 < 5
+    assert err == (f"mapupdate update: error: {bomb}: the gzip file holds more than {size // 4} "
+                   "lines, over a line per 4 bytes of it where a log's line takes 14 or more "
+                   "(a gzip bomb of short lines?); refused (--max-log-lines N raises the bound)")
+
+
+def test_the_bounds_on_a_log_are_set_on_the_command_line(room, tmp_path, capsys):
+    d = copy_room(room, tmp_path / "f")
+    log, size = d / "run.log", (d / "run.log").stat().st_size
+    (d / "run.clf.gz").write_bytes(gzip.compress(log.read_bytes(), mtime=0))
+    for path, option, bound, what in ((log, "--max-log-lines", 99, "99 lines"),
+                                      (log, "--max-log-bytes", size - 1,
+                                       f"{size - 1} bytes of text"),
+                                      (d / "run.clf.gz", "--max-log-lines", 50, "50 lines")):
+        err = refused(["update", "--map", d / "map.yaml", "--log", path, "--out", d / "o.yaml",
+                       option, bound, "--no-progress"], inputs=d, capsys=capsys,
+                      outputs=[d / "o.yaml"])
+        assert err == (f"mapupdate update: error: {path}: holds more than {what}, the bound "
+                       f"{option} gives; refused")
+    lines = ran(["update", "--map", d / "map.yaml", "--log", log, "--out", d / "o.yaml",
+                 "--max-log-lines", 100, "--max-log-bytes", size, "--no-progress"], capsys)
+    assert lines[1].startswith("  100 scans read, 100 used;")
+    for bad in ("0", "-5", "1e9"):
+        with pytest.raises(SystemExit) as stop:
+            main(["map", "--log", str(log), "--out", str(d / "o.yaml"), "--max-log-lines", bad])
+        assert stop.value.code == 2
+        assert capsys.readouterr().err.strip() == (
+            f"mapupdate map: error: argument --max-log-lines: must be a whole number >= 1, got "
+            f"{bad!r} (see mapupdate map --help)")
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared/data"
+
+
+def test_the_default_bounds_leave_the_real_logs_three_times_the_room_they_need():
+    from robotlogs.carmen import read_carmen
+    from robotlogs.text_lines import GZIP_BYTES_PER_LINE, GZIP_MAX_RATIO
+
+    logs = sorted(DATA.glob("*.gz")) + sorted(DATA.glob("radish/*.gz"))
+    if not logs:
+        pytest.skip(f"no gzip logs in {DATA}")
+    for path in logs:
+        text = gzip.decompress(path.read_bytes())
+        size = path.stat().st_size
+        assert 3 * text.count(b"\n") * GZIP_BYTES_PER_LINE <= size, path.name
+        assert 3 * len(text) <= GZIP_MAX_RATIO * size, path.name
+        assert read_carmen(path, strict=True).records, path.name

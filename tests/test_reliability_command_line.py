@@ -64,6 +64,43 @@ def ran(args, capsys) -> list[str]:
     return out.splitlines()
 
 
+# --- 1. a start pose off the map's free floor ---------------------------------------------------
+@pytest.mark.parametrize("pose, cell, message", [
+    ((50.0, 50.0, 0.0), None, "the initial pose (50, 50, 0) is off the map, which spans x 0 to "
+                              "11 m and y 0 to 11 m; give a pose on the map's free floor"),
+    ((-0.01, 5.0, 0.0), None, "the initial pose (-0.01, 5, 0) is off the map, which spans x 0 "
+                              "to 11 m and y 0 to 11 m; give a pose on the map's free floor"),
+    ((5.5, 5.5, 0.0), (110, 110, OCCUPIED),        # in the box the map holds
+     "the initial pose (5.5, 5.5, 0) is in an occupied cell of the map (row 110, column 110); "
+     "give a pose on the map's free floor"),
+    ((0.1, 0.12, 1.0), (2, 2, UNKNOWN),            # outside the room's walls
+     "the initial pose (0.1, 0.12, 1) is in an unknown cell of the map (row 2, column 2); give "
+     "a pose on the map's free floor"),
+])
+def test_a_start_pose_off_the_free_floor_is_refused_before_the_log_is_read(
+        room, tmp_path, capsys, monkeypatch, pose, cell, message):
+    import robot.replay
+
+    d = copy_room(room, tmp_path / "f")
+    if cell is not None:
+        row, col, value = cell
+        assert load_map(d / "map.yaml").data[row, col] == value
+    read = []
+    monkeypatch.setattr(robot.replay, "log_observations", lambda *a, **k: read.append(a))
+    err = refused(["update", "--map", d / "map.yaml", "--log", d / "run.log", "--out",
+                   d / "o.yaml", "--initial-pose", *pose, "--no-progress"], inputs=d,
+                  capsys=capsys, outputs=[d / "o.yaml", d / "o.pgm"])
+    assert err == f"mapupdate update: error: {message}" and read == []
+
+
+def test_the_robot_s_own_start_pose_is_taken(room, tmp_path, capsys):
+    d = copy_room(room, tmp_path / "f")
+    lines = ran(["update", "--map", d / "map.yaml", "--log", d / "run.log", "--out",
+                 d / "o.yaml", "--initial-pose", START.x, START.y, START.theta,
+                 "--no-progress"], capsys)
+    assert "  localiser: started at the given pose" in lines and (d / "o.yaml").exists()
+
+
 # --- 3. a gzip log cut short -------------------------------------------------------------------
 @pytest.fixture()
 def cut_log(room, tmp_path):

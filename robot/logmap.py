@@ -104,12 +104,17 @@ def map_frame(placed, resolution: float, source="log") -> OccupancyGrid:
     p = np.concatenate(points)
     lo = np.floor(p.min(axis=0) - MARGIN)
     hi = np.ceil(p.max(axis=0) + MARGIN)
-    width, height = (int(math.ceil(v / resolution - 1e-9)) for v in (hi - lo))
-    if width * height > MAX_CELLS:
-        raise LogError(f"{source}: the scans span {hi[0] - lo[0]:.0f} m x {hi[1] - lo[1]:.0f} m, "
-                       f"{width} x {height} cells at {resolution} m: more than {MAX_CELLS} "
-                       "cells; give a coarser --resolution")
-    return OccupancyGrid.empty(width, height, resolution, origin=(float(lo[0]), float(lo[1])))
+    # counted as floats: a pose of 1e308 m spans more cells than a float holds (inf), and no
+    # int can be made of that
+    with np.errstate(over="ignore", invalid="ignore"):
+        span = hi - lo
+        cells = np.ceil(span / resolution - 1e-9)
+    if not (np.all(np.isfinite(cells)) and cells[0] * cells[1] <= MAX_CELLS):
+        raise LogError(f"{source}: the scans span {span[0]:.6g} m x {span[1]:.6g} m, "
+                       f"{cells[0]:.6g} x {cells[1]:.6g} cells at {resolution} m: more than "
+                       f"{MAX_CELLS} cells; give a coarser --resolution")
+    return OccupancyGrid.empty(int(cells[0]), int(cells[1]), resolution,
+                               origin=(float(lo[0]), float(lo[1])))
 
 
 def _refuse_clash(log_path, out_path) -> None:

@@ -101,6 +101,69 @@ def test_the_robot_s_own_start_pose_is_taken(room, tmp_path, capsys):
     assert "  localiser: started at the given pose" in lines and (d / "o.yaml").exists()
 
 
+# --- 2. absurd numbers in a log -------------------------------------------------------------------
+def robotlaser_lines(max_range: str, reading: str, beams: int = 181) -> list[str]:
+    """ROBOTLASER1 lines of the room's log (180 deg, the laser at the robot), beam 5 of each
+    line replaced by ``reading``, the laser's range limit ``max_range``."""
+    lines = []
+    for line in flaser_lines([p for p, _, _ in world.Drive(seconds=2, rate=10.0).steps()],
+                             [0.1 * k for k in range(20)], beams=beams):
+        w = line.split()
+        ranges = w[2:2 + beams]
+        ranges[5] = reading
+        pose, t = w[2 + beams:5 + beams], w[8 + beams]
+        lines.append(f"ROBOTLASER1 0 -1.5707963 3.1415927 {np.pi / (beams - 1):.9f} {max_range} "
+                     f"0.01 0 {beams} {' '.join(ranges)} 0 {' '.join(pose)} {' '.join(pose)} "
+                     f"0 0 0 0 0 {t} h {t}")
+    return lines
+
+
+@pytest.mark.parametrize("kind, absurd, sane", [
+    # the reading is "no return" in both: past the laser's limit, 1e300 m or 80 m
+    ("ROBOTLASER1", robotlaser_lines("1e300", "1e300"), robotlaser_lines("80", "80")),
+    # a reading of 1e300 m from a SICK LMS is past its "no return" 81.83 m
+    ("FLASER", [" ".join(w[:7] + ["1e300"] + w[8:]) for w in
+                (line.split() for line in flaser_lines([START], [0.0]))],
+     [" ".join(w[:7] + ["81.83"] + w[8:]) for w in
+      (line.split() for line in flaser_lines([START], [0.0]))]),
+])
+def test_a_range_of_1e300_maps_as_no_return(tmp_path, capsys, kind, absurd, sane):
+    (tmp_path / "absurd.log").write_text("\n".join(absurd) + "\n")
+    (tmp_path / "sane.log").write_text("\n".join(sane) + "\n")
+    for name in ("absurd", "sane"):
+        ran(["map", "--log", tmp_path / f"{name}.log", "--out", tmp_path / f"{name}.yaml",
+             "--no-progress"], capsys)
+    a, b = load_map(tmp_path / "absurd.yaml"), load_map(tmp_path / "sane.yaml")
+    assert a.same_frame(b) and np.array_equal(a.data, b.data), kind
+    assert (a.data == OCCUPIED).sum() > 100
+
+
+def test_a_pose_of_1_7e308_is_a_map_too_large_not_an_overflow(tmp_path, capsys):
+    lines = flaser_lines([START, START], [0.0, 0.1])
+    w = lines[1].split()
+    lines[1] = " ".join(w[:183] + ["1.7e308"] + w[184:])      # the laser's x
+    (tmp_path / "far.log").write_text("\n".join(lines) + "\n")
+    err = refused(["map", "--log", tmp_path / "far.log", "--out", tmp_path / "far.yaml",
+                   "--no-progress"], inputs=tmp_path, capsys=capsys,
+                  outputs=[tmp_path / "far.yaml", tmp_path / "far.pgm"])
+    assert err.startswith(f"mapupdate map: error: {tmp_path / 'far.log'}: the scans span "
+                          "1.7e+308 m x ") and " m, inf x " in err
+    assert err.endswith(" cells at 0.05 m: more than 64000000 cells; give a coarser --resolution")
+
+
+@pytest.mark.parametrize("range_max", [np.inf, 1e300])
+def test_a_scan_whose_range_max_is_absurd_maps_as_one_of_50_m(range_max):
+    frame = OccupancyGrid.empty(220, 220, 0.05)
+    scan = world.partial_scan(world.room_walls(), START, 0.0, fov_deg=180.0, beams=181)
+    ranges = np.where(np.arange(181) % 7 == 0, np.inf, scan.ranges)   # some beams see nothing
+    maps = []
+    for limit in (range_max, 50.0):
+        mapper = LogOddsMapper(frame)
+        mapper.add_scan(Scan(ranges, scan.angle_min, scan.angle_increment, 0.01, limit), START)
+        maps.append(mapper.logodds)
+    assert np.array_equal(*maps) and np.count_nonzero(maps[0]) > 1000
+
+
 # --- 3. a gzip log cut short -------------------------------------------------------------------
 @pytest.fixture()
 def cut_log(room, tmp_path):

@@ -283,3 +283,20 @@ def test_the_default_bounds_leave_the_real_logs_three_times_the_room_they_need()
         assert 3 * text.count(b"\n") * GZIP_BYTES_PER_LINE <= size, path.name
         assert 3 * len(text) <= GZIP_MAX_RATIO * size, path.name
         assert read_carmen(path, strict=True).records, path.name
+
+
+# --- 5. a study whose run folder leads out of it ---------------------------------------------
+def test_summarise_refuses_a_run_folder_that_a_link_leads_out_of_the_study(tmp_path, capsys):
+    study, outside = tmp_path / "study", tmp_path / "outside"
+    (study / "runs").mkdir(parents=True)
+    outside.mkdir()
+    (outside / "result.json").write_text(json.dumps(
+        {"run": {}, "rows": [{"scenario": "stolen", "seed": 1, "method": "none",
+                              "session": "W2"}]}))
+    os.symlink("../../outside", study / "runs" / "a")          # climbs out with ..
+    (study / "sweep.json").write_text(json.dumps({"format": 1, "spec": {}, "runs": ["a"]}))
+    err = refused(["sweep", "--summarise", study], inputs=tmp_path, capsys=capsys,
+                  outputs=[study / "results.csv", study / "summary.md"])
+    assert err == (f"mapupdate sweep: error: {study / 'runs' / 'a'}: the run's folder leads out "
+                   f"of the study, to {outside.resolve()}; a study's runs are folders of its own")
+    assert sorted(p.name for p in study.iterdir()) == ["runs", "sweep.json"]

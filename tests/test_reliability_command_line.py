@@ -300,3 +300,64 @@ def test_summarise_refuses_a_run_folder_that_a_link_leads_out_of_the_study(tmp_p
     assert err == (f"mapupdate sweep: error: {study / 'runs' / 'a'}: the run's folder leads out "
                    f"of the study, to {outside.resolve()}; a study's runs are folders of its own")
     assert sorted(p.name for p in study.iterdir()) == ["runs", "sweep.json"]
+
+
+# --- 6. a damaged updater state ----------------------------------------------------------------
+@pytest.fixture(scope="module")
+def state(room, tmp_path_factory):
+    """A state of the robot's profile (N_b 10, the flag counts in the bits above the flags)."""
+    d = tmp_path_factory.mktemp("state")
+    assert main(["update", "--map", room / "map.yaml", "--log", room / "run.log", "--out",
+                 d / "o.yaml", "--state", d / "s.npz", "--no-progress"]) == 0
+    with np.load(d / "s.npz") as z:
+        arrays = dict(z)
+    meta = json.loads(str(arrays["meta"]))
+    assert meta["config"]["buffer_size"] == 10 and meta["config"]["unanimous_min"] > 0
+    return arrays
+
+
+def write_state(arrays: dict, path: Path, **meta_edits) -> Path:
+    meta = json.loads(str(arrays["meta"]))
+    meta.update(meta_edits)
+    meta = {k: v for k, v in meta.items() if v is not None}
+    with open(path, "wb") as f:
+        np.savez(f, **{**arrays, "meta": np.array(json.dumps(meta))})
+    return path
+
+
+def update_with(room, state: Path, out: Path) -> list:
+    return ["update", "--map", room / "map.yaml", "--log", room / "run.log", "--out", out,
+            "--state", state, "--no-progress"]
+
+
+def test_the_updater_s_own_buffers_hold_no_flag_beyond_their_count(state):
+    counts, flags = state["hist"] >> 10, state["hist"] & 0x3FF
+    assert np.count_nonzero(flags >> np.minimum(counts, 10)) == 0
+    assert np.count_nonzero(flags) > 50 and counts.max() == 63    # flags kept, counts saturated
+
+
+def test_a_state_with_bits_set_beyond_n_b_is_refused_as_damaged(room, state, tmp_path, capsys):
+    hist = state["hist"] | np.uint16(1 << 15)        # every cell's top bit, beyond N_b = 10
+    bad = write_state({**state, "hist": hist}, tmp_path / "bad.npz")
+    saved = json.loads(str(state["meta"]))["checksums"]["hist"]
+    err = refused(update_with(room, bad, tmp_path / "o.yaml"), inputs=tmp_path, capsys=capsys,
+                  outputs=[tmp_path / "o.yaml"])
+    assert err == (f"mapupdate update: error: {bad}: a damaged state: its buffers are not as "
+                   f"saved (CRC-32 {zlib.crc32(hist.tobytes()):#010x}, saved {saved:#010x})")
+
+
+def test_a_state_saved_before_the_checksums_is_checked_flag_by_count(room, state, tmp_path,
+                                                                     capsys):
+    old = write_state(state, tmp_path / "old.npz", checksums=None)
+    ran(update_with(room, old, tmp_path / "whole.yaml"), capsys)        # whole, it loads
+    hist = state["hist"].copy()
+    first = int(np.flatnonzero((hist >> 10) == 1)[0])          # a cell flagged once
+    hist.flat[first] |= np.uint16(1 << 5)                      # a flag five scans back
+    bad = write_state({**state, "hist": hist}, tmp_path / "bad.npz", checksums=None)
+    row, col = divmod(first, hist.shape[1])
+    err = refused(update_with(room, bad, tmp_path / "o.yaml"), inputs=tmp_path, capsys=capsys,
+                  outputs=[tmp_path / "o.yaml"])
+    assert err == (f"mapupdate update: error: {bad}: a damaged state: 1 cells' buffers hold "
+                   "flags further back than the cell's flag count, which no scan pushed (the "
+                   f"first at row {row}, column {col}: count 1, flags "
+                   f"{int(hist.flat[first]) & 0x3FF:#b})")

@@ -244,7 +244,8 @@ def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
 
 def _scenario_file(entry: str, source: str, key: str, base: Path) -> str:
     """The resolved path of a scenario named or given by path (beside the spec first), a
-    regular file: a folder, a FIFO or a device is refused now, not once the sweep started."""
+    regular file holding a scenario: a folder, a FIFO, a device or a file that is no scenario
+    (a YAML bomb) is refused now, not once the sweep has made its folder."""
     if not entry or "\x00" in entry or len(entry) > MAX_PATH_CHARS:
         _fail(source, key, f"not a scenario name or path: {_show(entry)}")
     try:
@@ -252,6 +253,7 @@ def _scenario_file(entry: str, source: str, key: str, base: Path) -> str:
         # any file beside the spec (a FIFO too, refused just below), never a folder there
         path = find_scenario(local if local.exists() and not local.is_dir() else entry)
         check_regular_file(path, "scenario file", MAX_TEXT_BYTES)
+        sim.load_scenario(path)
         return str(path.resolve())
     except (MapUpdatingError, OSError) as e:   # FileNotFoundError, a name too long for the OS
         _fail(source, key, str(e))

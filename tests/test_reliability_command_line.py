@@ -361,3 +361,45 @@ def test_a_state_saved_before_the_checksums_is_checked_flag_by_count(room, state
                    "flags further back than the cell's flag count, which no scan pushed (the "
                    f"first at row {row}, column {col}: count 1, flags "
                    f"{int(hist.flat[first]) & 0x3FF:#b})")
+
+
+# --- 7. YAML bombs -----------------------------------------------------------------------------
+def test_yaml_bombs_are_refused_in_one_line_by_every_command(room, tmp_path, capsys):
+    d = copy_room(room, tmp_path / "f")
+    bomb = d / "laughs.yaml"
+    bomb.write_text(BILLION_LAUGHS)
+    (d / "spec.yaml").write_text(f"scenarios: [{bomb}]\nseeds: [1]\nmethods: [none]\n")
+    line = f"{bomb}: the YAML expands to more than 1000000 nodes through its aliases (refused)"
+    out = d / "out"
+    for args, prefix in (
+            (["compare", bomb, d / "map.yaml"], ""),
+            (["update", "--map", bomb, "--log", d / "run.log", "--out", out / "o.yaml"], ""),
+            (["update", "--map", d / "map.yaml", "--log", d / "run.log", "--out", out / "o.yaml",
+              "--config", bomb], ""),
+            (["inject", "--map", bomb, "--log", d / "run.log", "--out", out, "--seed", 1], ""),
+            (["run", bomb, "--quick", "--out", out], ""),
+            (["render", bomb, "--out", d / "w.png"], ""),
+            (["fleet", "--scenario", bomb, "--quick", "--out", out], ""),
+            (["sweep", bomb, "--out", out], ""),
+            (["sweep", d / "spec.yaml", "--out", out], f"{d / 'spec.yaml'}: scenarios[0]: ")):
+        err = refused(args + (["--no-progress"] if args[0] not in ("compare", "render") else []),
+                      inputs=d, capsys=capsys, outputs=[out, d / "w.png"])
+        assert err == f"mapupdate {args[0]}: error: {prefix}{line}", args
+
+
+@pytest.mark.skipif(bool(ros2_tools.missing()), reason=ros2_tools.missing() or "")
+def test_the_ros2_node_started_on_a_yaml_bomb_says_so_in_one_line(room, tmp_path):
+    (tmp_path / "laughs.yaml").write_text(BILLION_LAUGHS)
+    graph = ros2_tools.Graph(tmp_path)
+    try:
+        for name, args in (("map_bomb", ["--map", tmp_path / "laughs.yaml"]),
+                           ("config_bomb", ["--map", room / "map.yaml", "--config",
+                                            tmp_path / "laughs.yaml"])):
+            node = graph.node(*args, "--autostart", name=name)
+            assert node.wait(90) == 2
+            assert graph.log(name).splitlines() == [
+                f"mapupdate ros2: error: the node did not come up: configure failed: "
+                f"{tmp_path / 'laughs.yaml'}: the YAML expands to more than 1000000 nodes "
+                "through its aliases (refused)"]
+    finally:
+        graph.close()

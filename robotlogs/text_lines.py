@@ -129,17 +129,24 @@ class TextLines:
                 raise
         return self
 
+    def __exit__(self, *exc) -> None:
+        self.file.close()
+        if self.raw is not None:
+            self.raw.gz.close()
+
     def _measure(self) -> None:
-        """Refuse a log past its bounds before a line is parsed: its lines are counted chunk
-        by chunk first (inflating is fast, a line parsed is a microsecond), so 2.7 GB of
-        comment lines are refused once the bound's 1.6 million lines are counted, in a tenth
-        of the time that parsing them takes."""
+        """Refuse a log past its bounds, or cut short when that is refused, before a line is
+        parsed: its lines are counted chunk by chunk first (inflating is fast, a line parsed
+        takes a microsecond), so 2.7 GB of comment lines are refused once the bound's 1.6
+        million lines are counted, in 0.04 s where parsing them took 1-2 s."""
         lines = run = total = 0
         with (gzip.open(self.path, "rb") if self.raw is not None else self.path.open("rb")) as f:
             while True:
                 try:
                     chunk = f.read1(CHUNK)
                 except EOFError:        # cut short: what came before the cut is measured
+                    if self.limits.refuse_cut:
+                        self._at_cut(lines, total - run, run)
                     break
                 if not chunk:
                     break
@@ -158,11 +165,6 @@ class TextLines:
     def _too_long(self, lineno: int) -> str:
         return (f"{self.path}, line {lineno}: longer than {MAX_LINE_BYTES} bytes, where a "
                 "CARMEN line is a few KB; refused")
-
-    def __exit__(self, *exc) -> None:
-        self.file.close()
-        if self.raw is not None:
-            self.raw.gz.close()
 
     def __iter__(self) -> Iterator[str]:
         total = 0

@@ -106,8 +106,11 @@ class LogOddsMapper:
         clearance = self.params.no_return_clearance
         limits = np.array([scan.range_min / res, scan.range_max / res, clearance / res,
                            self.params.hit_guard])
-        # A walk of length L grid units visits at most |dx| + |dy| + 2 <= sqrt(2) L + 2 cells.
-        cap = int(math.ceil(math.sqrt(2.0) * max(scan.range_max, clearance) / res)) + 4
+        # A walk of length L grid units visits at most |dx| + |dy| + 2 <= sqrt(2) L + 2 cells,
+        # and a walk clipped to the grid at most its height + width: the bound for a scan whose
+        # range_max is absurd (1e300, inf), which no walk reaches
+        longest = math.sqrt(2.0) * max(scan.range_max, clearance) / res
+        cap = int(math.ceil(min(longest, float(sum(self.logodds.shape))))) + 4
         rows = np.empty(cap, np.int64)
         cols = np.empty(cap, np.int64)
         self._scans += 1

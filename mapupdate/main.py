@@ -159,16 +159,36 @@ def _add_update(sub) -> None:
 
 
 def _add_log_options(p) -> None:
-    """What ``update`` and ``map`` both need to read a log."""
+    """What ``update``, ``map`` and ``inject`` need to read a log."""
     p.add_argument("--format", default=None, choices=["carmen", "ros1", "ros2"],
                    help="log format (default: detected)")
     p.add_argument("--scan-topic", action="append", default=[], help="LaserScan topic(s)")
     p.add_argument("--odom-topic", default=None)
     p.add_argument("--pose-topic", default=None)
     p.add_argument("--strict", action="store_true",
-                   help="refuse a log with a malformed line or message instead of skipping "
-                        "and counting it")
+                   help="refuse a log with a malformed line or message, or cut short, instead "
+                        "of skipping and counting it")
+    p.add_argument("--refuse-truncated", action="store_true",
+                   help="refuse a gzip log cut short (a full disk, a power cut) instead of "
+                        "reading it up to the cut")
+    p.add_argument("--max-log-lines", type=_whole_number, default=None, metavar="N",
+                   help="refuse a CARMEN log of more lines (default: none for a plain file, "
+                        "for a gzip file a line per 4 bytes of it, at least 1000000)")
+    p.add_argument("--max-log-bytes", type=_whole_number, default=None, metavar="N",
+                   help="refuse a CARMEN log of more bytes of text (default: none for a plain "
+                        "file, for a gzip file 100 times its size, at least 64 MiB)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _whole_number(text: str) -> int:
+    """A count of 1 or more, for argparse."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return value
 
 
 def _add_map(sub) -> None:

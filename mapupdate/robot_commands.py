@@ -20,7 +20,7 @@ from robot.outputs import check_outputs, map_files, map_inputs
 from robot.replay import LogSource, Outputs, Placement
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS, load_robot_config, section_config
 from robot.ros1.node import run_node
-from robotlogs import log_observations
+from robotlogs import LogLimits, log_observations
 
 from . import summaries
 from .version import __version__
@@ -59,7 +59,7 @@ def _update(args, map_path, out, trajectory):
     start = None if args.initial_pose is None else replay.parse_pose(args.initial_pose)
     log = LogSource(args.log, format=args.format, strict=args.strict,
                     scan_topics=tuple(args.scan_topic) or None, odom_topic=args.odom_topic,
-                    pose_topic=args.pose_topic)
+                    pose_topic=args.pose_topic, limits=log_limits(args))
     placement = Placement(source=args.poses, initial_pose=start,
                           smooth_window=args.smooth_poses, pose_check=args.pose_check,
                           localizer_config=config.localizer, pose_check_config=config.pose_check)
@@ -159,13 +159,18 @@ def _tum_times(path: Path) -> list[float]:
             if line.strip() and not line.startswith("#")]
 
 
+def log_limits(args) -> LogLimits:
+    """What a CARMEN log may hold, and whether one cut short is read: the log options."""
+    return LogLimits(args.max_log_lines, args.max_log_bytes, args.refuse_truncated)
+
+
 def map_command(args) -> int:
     check_outputs({"--log": [args.log]}, {"--out": map_files(args.out)})
     summary = logmap.map_from_log(args.log, args.out, resolution=args.resolution,
                                   pose_source=args.poses, log_format=args.format,
                                   strict=args.strict, scan_topics=args.scan_topic or None,
                                   odom_topic=args.odom_topic, pose_topic=args.pose_topic,
-                                  progress=not args.no_progress)
+                                  limits=log_limits(args), progress=not args.no_progress)
     print("\n".join(summaries.map_lines(summary)))
     return 0
 
@@ -175,12 +180,15 @@ def inject(args) -> int:
     grid = load_map(args.map)
     found = log_observations(args.log, log_format=args.format, strict=args.strict,
                              scan_topics=args.scan_topic or None, odom_topic=args.odom_topic,
-                             pose_topic=args.pose_topic)
+                             pose_topic=args.pose_topic, limits=log_limits(args))
     case = edited_world.make_case(grid, found.observations, args.seed, removed=args.removed,
                                   added=args.added, moved=args.moved, people=args.people,
                                   min_views=args.min_views, progress=not args.no_progress)
     case_folder.write_case(case, args.out, map_path=args.map, log_path=args.log)
-    print("\n".join(case_folder.case_lines(case, args.out)))
+    lines = case_folder.case_lines(case, args.out)
+    if found.stats.cut:
+        lines.append(f"  warning: {found.stats.cut}")
+    print("\n".join(lines))
     return 0
 
 

@@ -30,10 +30,12 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
                  start_time: float | None = None, end_time: float | None = None,
                  log_format: str | None = None, strict: bool = False, scan_topics=None,
                  odom_topic=None, pose_topic=None, truth_topic=None,
-                 laser_mount: Pose2D | None = None, params=None, progress: bool = True) -> dict:
+                 laser_mount: Pose2D | None = None, params=None, limits=None,
+                 progress: bool = True) -> dict:
     """Build a map from the scans of ``log_path`` (those within ``start_time`` / ``end_time``
     [s, log time] when given) and save it as ``out_path``; returns a summary. ``params``: a
-    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1)."""
+    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1); ``limits``: what a
+    CARMEN log may hold (``robotlogs.LogLimits``)."""
     wall0 = _time.perf_counter()
     if pose_source not in MAP_SOURCES:
         raise LogError(f"the map's poses must be one of {', '.join(MAP_SOURCES)}, got "
@@ -46,7 +48,7 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
     found = log_observations(log_path, log_format=log_format, strict=strict,
                              scan_topics=scan_topics, odom_topic=odom_topic,
                              pose_topic=pose_topic, truth_topic=truth_topic,
-                             laser_mount=laser_mount)
+                             laser_mount=laser_mount, limits=limits)
     if not found.has["recorded" if pose_source == "recorded" else "truth"]:
         raise LogError(f"{log_path}: no {'corrected' if pose_source == 'recorded' else 'true'} "
                        "poses to map with (a map needs a log whose poses are right; a raw log "
@@ -102,12 +104,17 @@ def map_frame(placed, resolution: float, source="log") -> OccupancyGrid:
     p = np.concatenate(points)
     lo = np.floor(p.min(axis=0) - MARGIN)
     hi = np.ceil(p.max(axis=0) + MARGIN)
-    width, height = (int(math.ceil(v / resolution - 1e-9)) for v in (hi - lo))
-    if width * height > MAX_CELLS:
-        raise LogError(f"{source}: the scans span {hi[0] - lo[0]:.0f} m x {hi[1] - lo[1]:.0f} m, "
-                       f"{width} x {height} cells at {resolution} m: more than {MAX_CELLS} "
-                       "cells; give a coarser --resolution")
-    return OccupancyGrid.empty(width, height, resolution, origin=(float(lo[0]), float(lo[1])))
+    # counted as floats: a pose of 1e308 m spans more cells than a float holds (inf), and no
+    # int can be made of that
+    with np.errstate(over="ignore", invalid="ignore"):
+        span = hi - lo
+        cells = np.ceil(span / resolution - 1e-9)
+    if not (np.all(np.isfinite(cells)) and cells[0] * cells[1] <= MAX_CELLS):
+        raise LogError(f"{source}: the scans span {span[0]:.6g} m x {span[1]:.6g} m, "
+                       f"{cells[0]:.6g} x {cells[1]:.6g} cells at {resolution} m: more than "
+                       f"{MAX_CELLS} cells; give a coarser --resolution")
+    return OccupancyGrid.empty(int(cells[0]), int(cells[1]), resolution,
+                               origin=(float(lo[0]), float(lo[1])))
 
 
 def _refuse_clash(log_path, out_path) -> None:

@@ -49,7 +49,7 @@ from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
 from localization.tracking import TrackingMonitor
-from robotlogs import LogError, Observation, log_observations
+from robotlogs import LogError, LogLimits, Observation, log_observations
 from robotlogs.tum import write_tum
 from updater import MapUpdater, ScanStatus, UpdaterConfig
 
@@ -167,8 +167,9 @@ class LogSource:
     """Where the log is and how to read it: ``path`` (a ROS 1 bag, a ROS 2 bag folder or a
     CARMEN log), its ``format`` (None: detected), ``strict`` (a malformed line or message is
     an error instead of a counted skip), the topics of a bag (None: found), ``laser_mount``
-    (None: the log's), and ``start_time`` / ``end_time`` [s, log time] that limit the scans
-    used."""
+    (None: the log's), ``start_time`` / ``end_time`` [s, log time] that limit the scans
+    used, and ``limits``: what a CARMEN log may hold, and whether one cut short is read
+    (``robotlogs.LogLimits``; None: its defaults)."""
 
     path: Path
     format: str | None = None
@@ -180,6 +181,7 @@ class LogSource:
     laser_mount: Pose2D | None = None
     start_time: float | None = None
     end_time: float | None = None
+    limits: LogLimits | None = None
 
 
 @dataclass(frozen=True)
@@ -230,10 +232,12 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
     check_update_arguments(place.source, place.smooth_window, method, state_path)
     _refuse_clashes(log.path, map_path, state_path, outputs.map, outputs.trajectory)
     grid = load_map(map_path)
+    if place.initial_pose is not None:      # a mistake in it is refused before the log is read
+        check_start_pose(grid, place.initial_pose)
     found = log_observations(log.path, log_format=log.format, strict=log.strict,
                              scan_topics=log.scan_topics, odom_topic=log.odom_topic,
                              pose_topic=log.pose_topic, truth_topic=log.truth_topic,
-                             laser_mount=log.laser_mount)
+                             laser_mount=log.laser_mount, limits=log.limits)
     done = replay_observations(grid, found, place, method=method, updater_config=updater_config,
                                state_path=state_path, window=(log.start_time, log.end_time),
                                log_path=log.path, progress=progress)
@@ -455,10 +459,8 @@ class LocalizerStart:
             config = LocalizerConfig.from_dict(config)
         elif isinstance(config, (str, Path)):
             config = LocalizerConfig.from_yaml(config)
-        if initial_pose is not None and not (isinstance(initial_pose, Pose2D)
-                                             and initial_pose.is_finite()):
-            raise LogError(f"the initial pose must be three finite numbers X Y YAW, got "
-                           f"{initial_pose!r}")
+        if initial_pose is not None:
+            check_start_pose(grid, initial_pose)
         self.grid, self.config, self.seed = grid, config, placement.seed
         self.initial_pose, self.initial_std = initial_pose, placement.initial_std
         self.map_frame = map_frame
@@ -481,6 +483,27 @@ class LocalizerStart:
             self.how = "started at the given pose" if self.initial_pose else \
                 "started at the first recorded pose"
         return loc, monitor
+
+
+def check_start_pose(grid: OccupancyGrid, pose) -> None:
+    """Refuse a start pose for the localiser that cannot be the robot's: not three finite
+    numbers, off the map, or in a cell the map holds occupied or unknown (the robot stands on
+    floor it has seen free). A start there would put the particles where no scan fits, and
+    the update would draw what the scans see around a wrong pose."""
+    if not (isinstance(pose, Pose2D) and pose.is_finite()):
+        raise LogError(f"the initial pose must be three finite numbers X Y YAW, got {pose!r}")
+    x0, y0, x1, y1 = grid.extent()
+    where = f"the initial pose ({pose.x:g}, {pose.y:g}, {pose.theta:g})"
+    if not (x0 <= pose.x < x1 and y0 <= pose.y < y1):
+        raise LogError(f"{where} is off the map, which spans x {x0:g} to {x1:g} m and y {y0:g} "
+                       f"to {y1:g} m; give a pose on the map's free floor")
+    row, col = (int(i) for i in grid.world_to_cell(pose.x, pose.y))
+    row, col = min(row, grid.height - 1), min(col, grid.width - 1)   # rounding at the far edge
+    cell = int(grid.data[row, col])
+    if cell != FREE:
+        what = "an occupied" if cell == OCCUPIED else "an unknown"
+        raise LogError(f"{where} is in {what} cell of the map (row {row}, column {col}); give "
+                       "a pose on the map's free floor")
 
 
 def _tracking_summary(pipeline: RobotPipeline, replay: Replay) -> dict | None:

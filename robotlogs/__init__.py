@@ -17,8 +17,9 @@ from .observations import (FORMATS, LogObservations, Observation, detect_format,
 from .records import (LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRecord,
                       TransformRecord)
 from .rosbag import BagTopics, BagWriter, bag_topics, read_bag, resolve_topics, write_bag
+from .text_lines import LogLimits
 
-__all__ = ["FORMATS", "BagTopics", "BagWriter", "CarmenLog", "LogError", "LogObservations",
-           "Observation", "OdomRecord", "PoseRecord", "ReadStats", "Record", "ScanRecord",
-           "TransformRecord", "bag_topics", "detect_format", "log_observations", "parse_carmen",
-           "read_bag", "read_carmen", "resolve_topics", "write_bag"]
+__all__ = ["FORMATS", "BagTopics", "BagWriter", "CarmenLog", "LogError", "LogLimits",
+           "LogObservations", "Observation", "OdomRecord", "PoseRecord", "ReadStats", "Record",
+           "ScanRecord", "TransformRecord", "bag_topics", "detect_format", "log_observations",
+           "parse_carmen", "read_bag", "read_carmen", "resolve_topics", "write_bag"]

@@ -24,21 +24,17 @@ an invalid beam (NaN in the scan), the line's other beams are kept, and such ran
 (``ReadStats.invalid_ranges``). Readings below 1 cm (0.0 is "no valid return" in the SENA
 logs) are invalid beams too, being below the scan's ``range_min``.
 
-A file that starts with gzip's magic bytes (``killian.clf.gz``) is read through gzip.
-Lines longer than ``MAX_LINE_BYTES``, and a gzip file that expands to more than
-``GZIP_MAX_RATIO`` times its size (and ``GZIP_MIN_LIMIT``), are refused with a ``LogError``
-as soon as the reading passes the bound, before the memory fills or the reading takes hours.
+The file is read by :class:`.text_lines.TextLines`: plain or gzip, within the bounds of
+:class:`.text_lines.LogLimits` (lines, bytes of text), and a gzip file cut short up to the cut,
+which ``ReadStats.cut`` then says (``strict`` or ``LogLimits.refuse_cut``: refused).
 """
 
 from __future__ import annotations
 
-import gzip
-import itertools
 import math
 import zlib
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,21 +44,12 @@ from gridmap.types import GridError
 
 from .records import LogError, OdomRecord, PoseRecord, ReadStats, Record, ScanRecord
 from .rosbag import check_angle_increment
+from .text_lines import LogLimits, TextLines
 
 # The SICK LMS reports 8183 cm when no echo came back; CARMEN logs keep that value.
 FLASER_NO_RETURN = 81.83
 # Readings below 1 cm are the lidar's error codes (dazzle, no measurement), not obstacles.
 RANGE_MIN = 0.01
-GZIP_MAGIC = b"\x1f\x8b"
-# A line holds at most 2 x 100 000 numbers (ranges and remissions, the counts' bound below),
-# far less than this in any real log (2 KB in the Radish logs); a line without an end, or one
-# of gigabytes, is refused when it passes this instead of filling the memory.
-MAX_LINE_BYTES = 8 * 1024 * 1024
-# Text logs compress 3 to 6 times (the Radish and Killian logs); gzip can reach 1000 times on
-# one repeated line, so a small file may expand to gigabytes of comments that take hours to
-# read. The reading stops at this many times the file's size, or GZIP_MIN_LIMIT bytes if more.
-GZIP_MAX_RATIO = 100
-GZIP_MIN_LIMIT = 64 * 1024 * 1024
 
 OLD_LASERS = {"FLASER": "front_laser", "RLASER": "rear_laser"}
 ROBOT_LASERS = {"ROBOTLASER1": "laser1", "ROBOTLASER2": "laser2"}
@@ -100,70 +87,34 @@ class CarmenLog:
         return [r for r in self.records if isinstance(r, OdomRecord)]
 
 
-def read_carmen(path, *, strict: bool = False,
-                flaser_no_return: float = FLASER_NO_RETURN) -> CarmenLog:
+def read_carmen(path, *, strict: bool = False, flaser_no_return: float = FLASER_NO_RETURN,
+                limits: LogLimits | None = None) -> CarmenLog:
     """Read a CARMEN log file (see the module docstring for the lines understood).
 
     ``strict`` turns the first malformed line into a :class:`LogError` naming it; otherwise
     such lines are skipped and counted in ``.stats``. A log with no usable line at all is an
-    error either way.
+    error either way. ``limits``: what the file may hold (``text_lines.LogLimits``; default:
+    a gzip file's bounds from its size); a gzip file cut short is read up to the cut and
+    ``.stats.cut`` says so, unless ``strict`` or ``limits.refuse_cut`` refuse it.
     """
     path = Path(path)
+    limits = limits or LogLimits()
+    if strict:
+        limits = replace(limits, refuse_cut=True)
     try:
-        with open_lines(path) as lines:
+        with TextLines(path, limits) as lines:
             log = parse_carmen(lines, source=str(path), strict=strict,
                                flaser_no_return=flaser_no_return)
+            log.stats.cut = lines.cut
     except (IsADirectoryError, FileNotFoundError, PermissionError):
         raise
     except (OSError, EOFError, zlib.error) as e:     # gzip's errors for a damaged archive
         raise LogError(f"{path}: cannot read: {e}") from None
     if not log.records:
+        cut = log.stats.cut.removeprefix(f"{path} is ")
         raise LogError(f"{path}: no usable CARMEN line (laser, ODOM or TRUEPOS); "
-                       f"{log.stats.summary()}")
+                       f"{log.stats.summary()}" + (f"; {cut}" if cut else ""))
     return log
-
-
-def is_gzip(path) -> bool:
-    """True when the file at ``path`` starts with gzip's magic bytes."""
-    with Path(path).open("rb") as f:
-        return f.read(2) == GZIP_MAGIC
-
-
-@contextmanager
-def open_lines(path):
-    """The log at ``path`` as text lines, through gzip when it is compressed, each line at most
-    ``MAX_LINE_BYTES`` and a gzip file's content at most ``gzip_limit`` bytes; past either
-    bound the iteration raises ``LogError`` naming the file."""
-    path = Path(path)
-    if is_gzip(path):
-        limit, f = gzip_limit(path), gzip.open(path, "rb")
-    else:
-        limit, f = None, path.open("rb")    # a plain file is as long as the disk holds
-    with f:
-        yield _bounded_lines(f, path, limit)
-
-
-def gzip_limit(path) -> int:
-    """The most bytes a gzip log at ``path`` may expand to (see ``GZIP_MAX_RATIO``)."""
-    return max(GZIP_MIN_LIMIT, GZIP_MAX_RATIO * Path(path).stat().st_size)
-
-
-def _bounded_lines(f, path: Path, limit: int | None) -> Iterator[str]:
-    total = 0
-    for lineno in itertools.count(1):
-        # one byte more than a line may hold, so that a longer line shows without being read
-        line = f.readline(MAX_LINE_BYTES + 1)
-        if not line:
-            return
-        if len(line) > MAX_LINE_BYTES:
-            raise LogError(f"{path}, line {lineno}: longer than {MAX_LINE_BYTES} bytes, where a "
-                           "CARMEN line is a few KB; refused")
-        total += len(line)
-        if limit is not None and total > limit:
-            raise LogError(f"{path}: the gzip file expands to more than {limit} bytes, over "
-                           f"{GZIP_MAX_RATIO} times its size where a log compresses 3 to 6 "
-                           "times (a gzip bomb?); refused")
-        yield line.decode("utf-8", errors="replace")
 
 
 def parse_carmen(lines: Iterable[str], *, source: str = "<lines>", strict: bool = False,

@@ -8,7 +8,6 @@ Imports only ``gridmap`` and this package.
 
 from __future__ import annotations
 
-import gzip
 import math
 import zlib
 from collections.abc import Iterable
@@ -20,10 +19,11 @@ import numpy as np
 from gridmap import Pose2D, Scan
 from gridmap.files import FileInputError, check_regular_file
 
-from .carmen import GZIP_MAGIC, read_carmen
+from .carmen import read_carmen
 from .frames import PoseTimeline, TransformTree
 from .records import LogError, OdomRecord, PoseRecord, ReadStats, ScanRecord, TransformRecord
 from .rosbag import bag_topics, read_bag, resolve_topics, scan_count
+from .text_lines import GZIP_MAGIC, LogLimits, gzip_head
 
 FORMATS = ("carmen", "ros1", "ros2")
 # How far laser-to-odometry offsets may spread and still be one fixed mount: logs print poses
@@ -75,10 +75,10 @@ def detect_format(path) -> str:
 
 
 def _gunzipped_head(path: Path) -> bytes:
-    """The first 4 KB of a gzip file's content (a compressed CARMEN log, as killian.clf.gz)."""
+    """The first 4 KB of a gzip file's content (a compressed CARMEN log, as killian.clf.gz),
+    also of one cut short."""
     try:
-        with gzip.open(path, "rb") as f:
-            return f.read(4096)
+        return gzip_head(path, 4096)
     except (OSError, EOFError, zlib.error) as e:
         raise LogError(f"{path}: a damaged gzip file: {e}") from None
 
@@ -94,7 +94,8 @@ def _is_text(head: bytes) -> bool:
 # --- observations from a CARMEN log ------------------------------------------------------------
 
 def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | None = None,
-                        stats: ReadStats | None = None) -> tuple[list[Observation], dict]:
+                        stats: ReadStats | None = None, limits: LogLimits | None = None
+                        ) -> tuple[list[Observation], dict]:
     """The scans of a CARMEN log with their poses, and what the log offers (``has``).
 
     The laser line's ``x y theta`` is the laser's pose (recorded localisation in corrected
@@ -103,9 +104,9 @@ def carmen_observations(path, *, strict: bool = False, laser_mount: Pose2D | Non
     localisation apart from the odometry, their difference from it is not the mount (it holds
     the map's offset from the odometry's frame) and the log says nothing else of it: the
     laser is taken to sit at the robot's origin, so the robot's recorded pose is the laser's,
-    in the map's frame.
+    in the map's frame. ``limits``: what the file may hold (``read_carmen``).
     """
-    log = read_carmen(path, strict=strict)
+    log = read_carmen(path, strict=strict, limits=limits)
     if stats is not None:
         stats.merge(log.stats)
     truth = PoseTimeline()
@@ -259,8 +260,11 @@ class LogObservations:
 
 def log_observations(path, *, log_format: str | None = None, strict: bool = False,
                      scan_topics=None, odom_topic=None, pose_topic=None, truth_topic=None,
-                     laser_mount: Pose2D | None = None) -> LogObservations:
-    """The observations of the log at ``path``, in log order (see ``LogObservations``)."""
+                     laser_mount: Pose2D | None = None, limits: LogLimits | None = None
+                     ) -> LogObservations:
+    """The observations of the log at ``path``, in log order (see ``LogObservations``).
+    ``limits``: what a CARMEN log may hold, and whether one cut short is read
+    (``text_lines.LogLimits``; a bag is read message by message)."""
     if not Path(path).is_dir():
         # a FIFO or a device would block the first read for ever, or never end
         try:
@@ -273,7 +277,7 @@ def log_observations(path, *, log_format: str | None = None, strict: bool = Fals
     stats = ReadStats()
     if fmt == "carmen":
         observations, has = carmen_observations(path, strict=strict, laser_mount=laser_mount,
-                                                stats=stats)
+                                                stats=stats, limits=limits)
         return LogObservations(observations, len(observations), fmt, has, stats)
     poses = bag_poses(path, odom_topic=odom_topic, pose_topic=pose_topic,
                       truth_topic=truth_topic, strict=strict, stats=stats)

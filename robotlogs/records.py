@@ -97,6 +97,7 @@ class ReadStats:
     first: dict = field(default_factory=dict)   # kind -> the first message of that kind
     invalid_ranges: int = 0          # NaN or negative readings kept as invalid beams ...
     scans_with_invalid_ranges: int = 0   # ... in this many scans
+    cut: str = ""                    # how a log cut short ended, "" for a whole one
 
     def skip(self, kind: str, message: str) -> None:
         self.skipped[kind] += 1
@@ -120,6 +121,7 @@ class ReadStats:
             self.first.setdefault(kind, message)
         self.invalid_ranges += other.invalid_ranges
         self.scans_with_invalid_ranges += other.scans_with_invalid_ranges
+        self.cut = self.cut or other.cut
 
     @property
     def total_skipped(self) -> int:
@@ -134,8 +136,8 @@ class ReadStats:
         return f"skipped {self.total_skipped} ({kinds}){first}"
 
     def lines(self) -> list[str]:
-        """What was skipped, one line per kind (with the first message of that kind), and the
-        invalid readings kept; empty when nothing was."""
+        """What was skipped, one line per kind (with the first message of that kind), the
+        invalid readings kept, and a warning for a log cut short; empty when nothing was."""
         out = []
         for kind, n in self.skipped.most_common():
             first = self.first.get(kind, "")
@@ -143,9 +145,11 @@ class ReadStats:
         if self.invalid_ranges:
             out.append(f"kept {self.scans_with_invalid_ranges} scans with "
                        f"{self.invalid_ranges} invalid ranges (NaN or negative) as invalid beams")
+        if self.cut:
+            out.append(f"warning: {self.cut}")
         return out
 
     def as_dict(self) -> dict:
         return {"skipped": dict(self.skipped), "ignored": dict(self.ignored),
                 "problems": list(self.problems), "invalid_ranges": self.invalid_ranges,
-                "scans_with_invalid_ranges": self.scans_with_invalid_ranges}
+                "scans_with_invalid_ranges": self.scans_with_invalid_ranges, "cut": self.cut}

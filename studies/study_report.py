@@ -85,13 +85,18 @@ def collect(out_dir) -> tuple[list[dict], list[str]]:
     except (KeyError, TypeError, AttributeError) as e:
         raise StudyFolderError(f"{out_dir / 'sweep.json'}: not a study file of this project "
                                f"({type(e).__name__}: {e})") from None
-    rows = []
+    rows, study = [], out_dir.resolve()
     for key in keys:
         # a run's folder is one name inside runs/: never a path that leaves the study
         if not isinstance(key, str) or not RUN_KEY.fullmatch(key) or ".." in key:
             raise StudyFolderError(f"{out_dir / 'sweep.json'}: run {key!r} is not a run name "
                                    "of this study")
-        path = out_dir / "runs" / key / "result.json"
+        folder = out_dir / "runs" / key
+        # nor one that a link leads out of it (runs/a -> ../../elsewhere), links and .. resolved
+        if not folder.resolve().is_relative_to(study):
+            raise StudyFolderError(f"{folder}: the run's folder leads out of the study, to "
+                                   f"{folder.resolve()}; a study's runs are folders of its own")
+        path = folder / "result.json"
         if not path.exists():
             continue
         record = _json(path, "run result")

@@ -51,8 +51,8 @@ from tqdm import tqdm
 import sim
 from gridmap import MapUpdatingError
 from gridmap.atomic import write_atomically
-from gridmap.files import (MAX_TEXT_BYTES, FileInputError, check_regular_file, parse_yaml,
-                           read_text)
+from gridmap.files import (MAX_TEXT_BYTES, FileInputError, check_regular_file, load_yaml,
+                           parse_yaml, read_text)
 from gridmap.suggest import did_you_mean
 from robot.methods import check_method
 from robot.robot_config import CLASSES, SECTIONS, load_robot_config, section_config
@@ -244,7 +244,9 @@ def _scenario_entry(entry, source: str, key: str, base: Path) -> dict:
 
 def _scenario_file(entry: str, source: str, key: str, base: Path) -> str:
     """The resolved path of a scenario named or given by path (beside the spec first), a
-    regular file: a folder, a FIFO or a device is refused now, not once the sweep started."""
+    regular file of YAML: a folder, a FIFO, a device, or a file that is not YAML or is an alias
+    bomb is refused now, not once the sweep has made its folder. (Its scenario is checked when
+    it is loaded: that takes seconds, reading it milliseconds.)"""
     if not entry or "\x00" in entry or len(entry) > MAX_PATH_CHARS:
         _fail(source, key, f"not a scenario name or path: {_show(entry)}")
     try:
@@ -252,6 +254,7 @@ def _scenario_file(entry: str, source: str, key: str, base: Path) -> str:
         # any file beside the spec (a FIFO too, refused just below), never a folder there
         path = find_scenario(local if local.exists() and not local.is_dir() else entry)
         check_regular_file(path, "scenario file", MAX_TEXT_BYTES)
+        load_yaml(path, "scenario file")
         return str(path.resolve())
     except (MapUpdatingError, OSError) as e:   # FileNotFoundError, a name too long for the OS
         _fail(source, key, str(e))

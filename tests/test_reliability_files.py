@@ -30,8 +30,9 @@ from robot.pipeline import RobotPipeline
 from robot.replay import LogSource, Outputs, Placement, update_from_log
 from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from robot.ros_common.scans import usable_scan
-from robotlogs.carmen import GZIP_MIN_LIMIT, MAX_LINE_BYTES, gzip_limit, read_carmen
+from robotlogs.carmen import read_carmen
 from robotlogs.records import LogError
+from robotlogs.text_lines import GZIP_MIN_BYTES, MAX_LINE_BYTES, LogLimits, bounds
 from updater import MapUpdater, UpdaterConfig
 
 try:
@@ -89,8 +90,8 @@ def test_a_gzip_log_of_endless_comments_is_refused_at_the_bound_not_read_through
     line = b"# " + b"x" * 4093 + b"\n"
     bomb = tmp_path / "bomb.clf.gz"
     expands = gzip_bomb(bomb, line * 256, 1024)              # 1 GB of comments in 1.4 MB
-    limit = gzip_limit(bomb)
-    assert expands == 1 << 30 and GZIP_MIN_LIMIT <= limit < expands / 5
+    limit = bounds(bomb, LogLimits())[1]
+    assert expands == 1 << 30 and GZIP_MIN_BYTES <= limit < expands / 5
     t0 = time.perf_counter()
     with pytest.raises(LogError, match=r"bomb.clf.gz: the gzip file expands to more than "
                                        rf"{limit} bytes.*gzip bomb"):

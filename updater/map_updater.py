@@ -52,7 +52,7 @@ from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
 from gridmap.atomic import write_atomically
 from gridmap.files import FileInputError, check_regular_file
 
-from . import steps
+from . import saved_state, steps
 from .config import UpdaterConfig, UpdaterError
 from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
 from .hit_tiles import HitTiles
@@ -396,12 +396,14 @@ class MapUpdater:
         """Write the whole state to ``path`` (npz): written to a temporary file beside it and
         renamed, so a crash never leaves a half-written state."""
         path = Path(path)
+        arrays = {"reference": self._ref, "hist": self._hist, "hits": self._hits.dense(),
+                  "seen": self._seen}
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
-                "gate": self._gate.state(), "counts": self._counts}
+                "gate": self._gate.state(), "counts": self._counts,
+                "checksums": saved_state.checksums(arrays)}
         buf = io.BytesIO()
-        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), reference=self._ref,
-                            hist=self._hist, hits=self._hits.dense(), seen=self._seen)
+        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), **arrays)
         try:
             write_atomically(path, buf.getvalue())
         except OSError as e:
@@ -485,6 +487,8 @@ class MapUpdater:
                    if k not in meta]
         if missing:
             raise UpdaterError(f"{path}: state lacks {', '.join(missing)}")
+        saved_state.check_checksums(path, meta.get("checksums"), {
+            "reference": ref, "hist": hist, "hits": hits, "seen": seen})
         config = UpdaterConfig.from_dict(meta["config"], source=str(path))
         try:
             grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))
@@ -493,6 +497,9 @@ class MapUpdater:
         updater = cls(grid, config)
         packed = got == STATE_FORMAT and steps.count_shift(config) > 0
         updater._restore_buffers(path, hist, hits, seen, packed)
+        saved_state.check_flags_counted(path, updater._hist.reshape(-1),
+                                        updater._flag_counts(), steps.buffer_mask(config),
+                                        config.buffer_size, grid.width)
         _check_gate_state(path, meta["gate"])
         try:
             updater._gate.restore(meta["gate"])

@@ -91,6 +91,8 @@ class MapUpdaterNode(LifecycleNode):
         self.pipeline: RobotPipeline | None = None
         self.settings: Ros2Settings | None = None
         self.failure = ""                       # why the last configure failed
+        # logged for a lifecycle manager; with --autostart the command line says it instead
+        self.log_failure = True
         self.store: StoreLink | None = None     # the map store, with the ``store`` parameter
         self._active = []                       # what activate made and deactivate destroys
         self._configured = []                   # what configure made and cleanup destroys
@@ -134,7 +136,8 @@ class MapUpdaterNode(LifecycleNode):
                 reference = self.store.start(reference)
         except (MapUpdatingError, OSError) as e:
             self.failure = " ".join(str(e).split())
-            self.get_logger().error(f"configure: {self.failure}")
+            if self.log_failure:
+                self.get_logger().error(f"configure: {self.failure}")
             return FAILURE
         s = self.settings
         self._reset_state()
@@ -431,6 +434,7 @@ def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None
     line)."""
     rclpy.init(args=argv if argv is not None else sys.argv)
     node = MapUpdaterNode(map_path, config_path)
+    node.log_failure = not autostart        # one line, the command's, for a failed start
     try:
         if autostart:
             for step in (node.trigger_configure, node.trigger_activate):

@@ -106,7 +106,7 @@ class MapUpdaterNode(LifecycleNode):
         self._gaps = Gaps()
         self._active = []                       # what activate made and deactivate destroys
         self._configured = []                   # what configure made and cleanup destroys
-        self._publishers = {}
+        self._outputs = {}                      # the lifecycle publishers configure made
         self.parameter_error = ""
         self._save_refusal = ""                 # why ``save`` may not write save_path
         given, foreign = given_parameters(self)
@@ -134,36 +134,22 @@ class MapUpdaterNode(LifecycleNode):
     # --- lifecycle ----------------------------------------------------------------------------
     def on_configure(self, state) -> TransitionCallbackReturn:
         try:
-            reference = self._configure()
+            self._configure()
         except Exception as e:  # noqa: BLE001 - whatever it is, one line and a failed transition
             self.failure = " ".join(str(e).split()) or type(e).__name__
             if not isinstance(e, (MapUpdatingError, OSError)):
                 self.failure = f"{type(e).__name__}: {self.failure}"
             self.get_logger().error(f"configure: {self.failure}")
+            self.on_cleanup(state)
             return FAILURE
         s = self.settings
-        self._reset_state()
-        warm_up(self._pipeline_on)
-        self._configured = services.create(self)
-        if reference is not None:
-            self._start_on(reference)
-        else:
-            self._configured.append(self.create_subscription(GridMsg, s.map_topic,
-                                                             self._on_map, LATCHED))
-        self._publishers = {
-            "map": self.create_lifecycle_publisher(GridMsg, "map_updated", LATCHED),
-            "metadata": self.create_lifecycle_publisher(MapMetaData, "map_updated_metadata",
-                                                        LATCHED),
-            "diagnostics": self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", 10)}
-        if services.OccupancyGridUpdate is not None:
-            self._publishers["updates"] = self.create_lifecycle_publisher(
-                services.OccupancyGridUpdate, "map_updated_updates", 10)
         self.get_logger().info(f"configured ({self.map_path or 'waiting for ' + s.map_topic}; "
                                f"scans on {', '.join(s.scan_topics)})")
         return SUCCESS
 
-    def _configure(self) -> OccupancyGrid | None:
-        """The checks and the reference map of ``configure``; raises with the reason."""
+    def _configure(self) -> None:
+        """The checks, the reference map, the services and publishers of ``configure``;
+        raises with the reason."""
         if self.parameter_error:
             raise MapUpdatingError(self.parameter_error)
         s = self.settings
@@ -174,7 +160,22 @@ class MapUpdaterNode(LifecycleNode):
         self.store = services.store_link(s)
         if self.store is not None:
             reference = self.store.start(reference)
-        return reference
+        self._reset_state()
+        warm_up(self._pipeline_on)
+        self._configured = services.create(self)
+        self._outputs = {
+            "map": self.create_lifecycle_publisher(GridMsg, "map_updated", LATCHED),
+            "metadata": self.create_lifecycle_publisher(MapMetaData, "map_updated_metadata",
+                                                        LATCHED),
+            "diagnostics": self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", 10)}
+        if services.OccupancyGridUpdate is not None:
+            self._outputs["updates"] = self.create_lifecycle_publisher(
+                services.OccupancyGridUpdate, "map_updated_updates", 10)
+        if reference is not None:
+            self._start_on(reference)
+        else:
+            self._configured.append(self.create_subscription(GridMsg, s.map_topic,
+                                                             self._on_map, LATCHED))
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         s = self.settings
@@ -239,9 +240,9 @@ class MapUpdaterNode(LifecycleNode):
             else:
                 self.destroy_subscription(entity)
         self._configured = []
-        for pub in self._publishers.values():
+        for pub in self._outputs.values():
             self.destroy_lifecycle_publisher(pub)
-        self._publishers = {}
+        self._outputs = {}
         self.pipeline = None
         self._reset_state()
         return SUCCESS
@@ -432,8 +433,10 @@ class MapUpdaterNode(LifecycleNode):
 
     def _diagnostics(self, counts: dict) -> None:
         self.health.counts["scans_waiting"] = len(self._scans)
-        if not self._gaps.numbered:
-            self.health.notes["scans_lost_in_transport"] = "not numbered by the middleware"
+        if self.health.counts["scans_received"] and not self._gaps.numbered:
+            self.health.notes["scans_lost_in_transport"] = "unknown: not numbered by the rmw"
+        else:
+            self.health.notes.pop("scans_lost_in_transport", None)
         status = DiagnosticStatus()
         status.name = f"{self.get_fully_qualified_name()}: health"
         status.hardware_id = self.settings.map_frame
@@ -448,7 +451,7 @@ class MapUpdaterNode(LifecycleNode):
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [status]
-        self._publishers["diagnostics"].publish(array)
+        self._outputs["diagnostics"].publish(array)
 
     def summary(self) -> str:
         counts = pipeline_values(self.pipeline, self.settings.method) \

@@ -177,13 +177,13 @@ def publish_map(node, grid: OccupancyGrid, before) -> None:
     msg.info.origin.position.x, msg.info.origin.position.y = f["origin"]
     msg.info.origin.orientation.w = 1.0
     msg.data = f["data"]
-    node._publishers["map"].publish(msg)
-    node._publishers["metadata"].publish(msg.info)
+    node._outputs["map"].publish(msg)
+    node._outputs["metadata"].publish(msg.info)
     box = None if before is None else changed_box(before, grid.data)
-    if box is not None and "updates" in node._publishers:
+    if box is not None and "updates" in node._outputs:
         x, y, w, h = box
         update = OccupancyGridUpdate()
         update.header = msg.header
         update.x, update.y, update.width, update.height = x, y, w, h
         update.data = grid.data[y:y + h, x:x + w].reshape(-1).tolist()
-        node._publishers["updates"].publish(update)
+        node._outputs["updates"].publish(update)

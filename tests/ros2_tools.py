@@ -77,9 +77,9 @@ class Graph:
             self.env.pop(var, None)
         self.procs: list[subprocess.Popen] = []
 
-    def start(self, args, name: str) -> subprocess.Popen:
+    def start(self, args, name: str, python: bool = True) -> subprocess.Popen:
         log = open(self.folder / f"{name}.log", "ab")
-        p = subprocess.Popen([str(PYTHON), *map(str, args)], env=self.env, stdout=log,
+        p = subprocess.Popen([str(PYTHON)] * python + [*map(str, args)], env=self.env, stdout=log,
                              stderr=subprocess.STDOUT, cwd=self.folder, start_new_session=True)
         self.procs.append(p)
         return p

@@ -74,7 +74,7 @@ from . import services
 from .bond import Bond
 from .bond import Status as BondStatus
 from .lifecycle import Lifecycle
-from .parameters import declare_all, given_parameters
+from .parameters import declare_all, given_parameters, valueless
 
 try:                 # built from their definitions by `make ros2` (no wheel carries them)
     from tf2_msgs.msg import TFMessage
@@ -463,8 +463,15 @@ def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None
     """``mapupdate ros2``: spin the lifecycle node until shut down (SIGINT, or its shutdown
     transition); with ``autostart`` (or the ``autostart`` parameter), configure and activate
     it at once (a failed transition ends the command, said in one line)."""
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = MapUpdaterNode(map_path, config_path)
+    argv = argv if argv is not None else sys.argv
+    rclpy.init(args=argv)
+    try:
+        node = MapUpdaterNode(map_path, config_path)
+    except ValueError as e:                     # rclpy's: a parameter given no value
+        rclpy.try_shutdown()
+        names = ", ".join(valueless(argv)) or "one of them"
+        raise MapUpdatingError(f"the node was not made: parameters given no value (an empty "
+                               f"list or none): {names} ({' '.join(str(e).split())})") from None
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
@@ -476,6 +483,9 @@ def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None
                                            f"{node.failure or 'see its log'}")
         while rclpy.ok() and node.lifecycle.state != "finalized":
             executor.spin_once(timeout_sec=0.5)
+        end = time.monotonic() + 0.5            # the shutdown's answer on its way
+        while rclpy.ok() and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -58,6 +58,34 @@ def given_parameters(node) -> tuple[dict, list[str]]:
     return nested, foreign
 
 
+def valueless(argv) -> list[str]:
+    """The parameters given no value (``[]``, ``~``) in the parameter files of ``argv``: rclpy
+    cannot declare them, and refuses to make the node at all. Named so that the error can say
+    which they are."""
+    import yaml
+
+    files = [argv[k + 1] for k, a in enumerate(argv[:-1]) if a == "--params-file"]
+    found = []
+
+    def walk(tree, prefix):
+        for key, value in (tree.items() if isinstance(tree, dict) else ()):
+            if isinstance(value, dict):
+                walk(value, f"{prefix}{key}.")
+            elif value is None or value == []:
+                found.append(f"{prefix}{key}")
+
+    for path in files:
+        try:
+            with open(path, encoding="utf-8") as f:
+                nodes = yaml.safe_load(f) or {}
+        except (OSError, yaml.YAMLError):
+            continue
+        for section in (nodes.values() if isinstance(nodes, dict) else ()):
+            if isinstance(section, dict):
+                walk(section.get("ros__parameters", {}), "")
+    return found
+
+
 def declare_all(node, settings, updater_config, pose_check_config) -> None:
     """Declare every parameter with the value in use, read-only, described, with its range."""
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor

@@ -11,7 +11,10 @@ PACKAGE = "lidar_map_updating"
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=[PACKAGE],
+    packages=[],
+    # a plain script, not an entry point: the project's own distribution is also called
+    # lidar-map-updating, and an entry point's wrapper would look for it there
+    scripts=["scripts/map_updater"],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -24,5 +27,4 @@ setup(
     maintainer_email="maintainers@example.org",
     description="The map updater as a ROS 2 lifecycle node beside Nav2",
     license="MIT",
-    entry_points={"console_scripts": [f"map_updater = {PACKAGE}.map_updater:main"]},
 )

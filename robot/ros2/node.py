@@ -364,14 +364,10 @@ class MapUpdaterNode(LifecycleNode):
         self._drain()
 
     def _drain(self, force: bool = False) -> None:
-        """Place and use every waiting scan the odometry has passed, and the first ones that
-        waited ``tf_timeout`` for it (all of them, ``force``)."""
-        while self._scans:
-            rec, arrival = self._scans.first()
-            if not (force or self.poses.ready(rec.time)
-                    or time.perf_counter() - arrival > self.settings.tf_timeout):
-                break
-            self._scans.pop()
+        """Place and use every waiting scan the odometry has passed (all of them, ``force``,
+        when the odometry has stopped for longer than ``tf_timeout``)."""
+        while self._scans and (force or self.poses.ready(self._scans.first()[0].time)):
+            rec, arrival = self._scans.pop()
             t0 = time.perf_counter()
             try:
                 self._use(rec)

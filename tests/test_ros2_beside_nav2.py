@@ -291,6 +291,10 @@ def test_services_answer_only_while_active_and_shutdown_ends_the_process(graph, 
     node = graph.node("--map", room_map, "--ros-args", "-r", f"__node:={name}", "-p",
                       f"save_path:={save}", name=name)
     graph.wait_for_service(f"/{name}/get_state", timeout=120)
+    # declared from the start, before any transition, as Nav2's nodes declare theirs
+    before = json.loads(graph.script(DESCRIBE, name, "publish_period").strip().splitlines()[-1])
+    assert before["state"] == "unconfigured" and "updater.threshold" in before["listed"]
+    assert before["publish_period"]["range"] == [[0.01, 3600.0]]
     assert _transition(graph, name, CONFIGURE)
     for service in ("save", "commit", "reset"):
         answer = graph.call(f"/{name}/{service}")

@@ -177,7 +177,7 @@ def check_save_path(save_path: str) -> None:
     """Refuse, at start, a ``save_path`` that cannot be written: a folder, or a file in a
     folder that does not exist or cannot be written to (found at start, not at the first
     save, hours later)."""
-    path = Path(save_path).expanduser()
+    path = Path(save_path)
     if path.is_dir() or save_path.endswith(("/", os.sep)) or path.name in ("", ".", ".."):
         raise NodeSettingsError(f"parameter '~save_path' must name a map file (.yaml), got the "
                                 f"folder {save_path!r}")

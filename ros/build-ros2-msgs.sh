@@ -1,10 +1,12 @@
 #!/bin/sh
-# tf2_msgs (/tf, /tf_static) and map_msgs (the costmap's OccupancyGridUpdate) have no wheel:
+# tf2_msgs (/tf, /tf_static), map_msgs (the costmap's OccupancyGridUpdate), bond (Nav2's
+# lifecycle manager's heartbeats) and nav2_msgs' SaveMap (the map saver's service) have no wheel:
 # build them from their definitions (ros/msgs) with the rosidl generators the wheels provide,
 # and install them into the ROS 2 environment as a ROS install would (VENV/lib, VENV/share and
 # site-packages), where the wheels' start-up hook already points LD_LIBRARY_PATH.
 # Needs cmake and a C/C++ compiler; without them the node reads /amcl_pose and /odom instead.
 set -u
+PKGS="tf2_msgs map_msgs bond nav2_msgs"
 venv=${1:?usage: build-ros2-msgs.sh VENV}
 venv=$(cd "$venv" && pwd)
 here=$(cd "$(dirname "$0")" && pwd)
@@ -26,7 +28,7 @@ grep -rl /opt/python/cp311-cp311 "$venv/share" --include='*.cmake' | while read 
 done
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-for pkg in tf2_msgs map_msgs; do
+for pkg in $PKGS; do
   mkdir -p "$work/$pkg"
   (cd "$work/$pkg" &&
     env AMENT_PREFIX_PATH="$venv" CMAKE_PREFIX_PATH="$venv" _ROS_WHEELS_BOOTSTRAP_COMPLETE=1 \
@@ -38,9 +40,10 @@ for pkg in tf2_msgs map_msgs; do
       make -j2 install) || { echo "building $pkg failed"; exit 1; }
 done
 # ament_cmake_python installs next to the interpreter's version folder; make it importable.
-for pkg in tf2_msgs map_msgs; do
+for pkg in $PKGS; do
   [ -d "$site/$pkg" ] || cp -r "$venv"/lib/python3*/site-packages/"$pkg" "$site/" 2>/dev/null
 done
-"$py" -c 'from tf2_msgs.msg import TFMessage; from map_msgs.msg import OccupancyGridUpdate' \
-  || { echo "tf2_msgs or map_msgs built but not importable"; exit 1; }
-echo "built tf2_msgs and map_msgs"
+"$py" -c 'from tf2_msgs.msg import TFMessage; from map_msgs.msg import OccupancyGridUpdate
+from bond.msg import Status; from nav2_msgs.srv import SaveMap' \
+  || { echo "the messages were built but are not importable"; exit 1; }
+echo "built $PKGS"

@@ -8,11 +8,16 @@ set -u
 py=${1:?usage: install-ros2.sh PYTHON}
 venv=.venv-ros2
 msgs() {
-  # tf2_msgs and map_msgs from their definitions (no wheel carries them)
-  [ -d "$venv/share/tf2_msgs" ] && [ -d "$venv/share/map_msgs" ] && return 0
-  echo "building tf2_msgs and map_msgs into $venv (/tf for the node's poses, the costmap's updates)"
+  # tf2_msgs, map_msgs, bond and nav2_msgs' SaveMap from their definitions (no wheel carries
+  # them), and colcon to build the ROS 2 package as a workspace would
+  [ -d "$venv/share/tf2_msgs" ] && [ -d "$venv/share/map_msgs" ] && [ -d "$venv/share/bond" ] &&
+    [ -d "$venv/share/nav2_msgs" ] && [ -x "$venv/bin/colcon" ] && return 0
+  echo "building tf2_msgs, map_msgs, bond and nav2_msgs into $venv (/tf, the costmap's updates, Nav2's bond and SaveMap)"
   sh ros/build-ros2-msgs.sh "$venv" >>"$venv.log" 2>&1 ||
-    echo "could not build tf2_msgs and map_msgs (see $venv.log): the node's tf tests will skip"
+    echo "could not build the messages (see $venv.log): the node's tf tests will skip"
+  "$venv/bin/pip" install --quiet colcon-core colcon-ros colcon-python-setup-py \
+    ros-jazzy-ament-cmake-python >>"$venv.log" 2>&1 ||
+    echo "could not install colcon (see $venv.log): the package build test will skip"
 }
 if [ -x "$venv/bin/mapupdate" ] && [ "$venv/bin/mapupdate" -nt pyproject.toml ]; then
   msgs

@@ -17,6 +17,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
+PLAY = ROOT / "ros" / "tools" / "play.py"
 # Cyclone DDS found the way Fast DDS's localhost discovery goes: unicast on the loopback, to
 # the well-known ports of each participant index
 CYCLONE = ('<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
@@ -43,20 +44,32 @@ def missing_tf() -> str:
     wheel, `make ros2` builds them."""
     if missing():
         return missing()
-    p = subprocess.run([PYTHON, "-c", "import tf2_msgs.msg, map_msgs.msg"], capture_output=True,
-                       text=True, timeout=120)
+    p = subprocess.run([PYTHON, "-c", "import tf2_msgs.msg, map_msgs.msg, bond.msg, "
+                        "nav2_msgs.srv"], capture_output=True, text=True, timeout=120)
     if p.returncode:
-        return ("tf2_msgs and map_msgs were not built into .venv-ros2 (`make ros2` builds them "
-                f"with cmake and a C compiler): {p.stderr.strip()[-200:]}")
+        return ("tf2_msgs, map_msgs, bond and nav2_msgs were not built into .venv-ros2 (`make "
+                f"ros2` builds them with cmake and a C compiler): {p.stderr.strip()[-200:]}")
+    return ""
+
+
+@functools.cache
+def missing_colcon() -> str:
+    """Why the package build test cannot run here ('' when it can)."""
+    if missing():
+        return missing()
+    if not (PYTHON.parent / "colcon").exists():
+        return "colcon is not in .venv-ros2 (`make ros2` installs colcon-core and colcon-ros)"
     return ""
 
 
 class Graph:
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, other_than: "Graph | None" = None):
         self.folder = folder
         # domains 51-100: the README's journeys, which may run beside this in another test
         # process, take 1-50
-        self.env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(51, 100)),
+        taken = {other_than.env["ROS_DOMAIN_ID"]} if other_than is not None else set()
+        domain = random.choice([str(d) for d in range(51, 101) if str(d) not in taken])
+        self.env = {**os.environ, "ROS_DOMAIN_ID": domain,
                     "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                     "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp", "PYTHONUNBUFFERED": "1",
                     "ROS_LOG_DIR": str(folder / "log"), "CYCLONEDDS_URI": CYCLONE}
@@ -64,9 +77,9 @@ class Graph:
             self.env.pop(var, None)
         self.procs: list[subprocess.Popen] = []
 
-    def start(self, args, name: str) -> subprocess.Popen:
+    def start(self, args, name: str, python: bool = True) -> subprocess.Popen:
         log = open(self.folder / f"{name}.log", "ab")
-        p = subprocess.Popen([str(PYTHON), *map(str, args)], env=self.env, stdout=log,
+        p = subprocess.Popen([str(PYTHON)] * python + [*map(str, args)], env=self.env, stdout=log,
                              stderr=subprocess.STDOUT, cwd=self.folder, start_new_session=True)
         self.procs.append(p)
         return p
@@ -94,9 +107,9 @@ class Graph:
     def wait_for_service(self, service: str, timeout: float = 60.0) -> None:
         self.call(service, "lifecycle_msgs.srv.GetState", timeout=timeout)
 
-    def replay(self, bag: Path, rate: float, poses: str = "tf") -> str:
-        p = subprocess.run([str(PYTHON), "-m", "robot.ros2.play", str(bag), "--rate",
-                            str(rate), "--poses", poses], env=self.env, capture_output=True, text=True,
+    def replay(self, bag: Path, rate: float, poses: str = "tf", *more: str) -> str:
+        p = subprocess.run([str(PYTHON), str(PLAY), str(bag), "--rate", str(rate), "--poses",
+                            poses, *more], env=self.env, capture_output=True, text=True,
                            timeout=1200, cwd=self.folder)
         assert p.returncode == 0, p.stderr[-3000:]
         return p.stdout

@@ -126,7 +126,7 @@ def test_command_line_starts_without_compiling_kernels():
 @pytest.mark.parametrize("front_end, modules", [
     ("gymnasium", ["scenarios/gym/__init__.py", "scenarios/gym/env.py"]),
     ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["robot/ros1/node.py"]),
-    ("rclpy", ["robot/ros2/node.py", "robot/ros2/play.py", "robot/ros2/trigger.py"]),
+    ("rclpy", ["robot/ros2/bond.py", "robot/ros2/lifecycle.py", "robot/ros2/node.py"]),
     ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"]),
     ("psycopg", ["mapstore/backends.py"])])
 def test_each_optional_package_is_imported_in_one_place_only(front_end, modules):

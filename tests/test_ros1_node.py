@@ -7,6 +7,8 @@ as root; elsewhere these tests skip with the reason."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -373,3 +375,121 @@ def test_a_scan_worker_that_stops_anyway_is_an_error_on_diagnostics(ros):
     status = sent[0].status[0]
     assert status.level == status.ERROR
     assert status.message == "the scan worker stopped (RuntimeError: queue broken)"
+
+
+TURNED_AND_STALE = r"""
+import math, sys, time
+import rospy, tf2_ros
+from geometry_msgs.msg import TransformStamped
+from sensor_msgs.msg import LaserScan
+
+rospy.init_node("turned_robot", disable_signals=True)
+scans = rospy.Publisher("scan", LaserScan, queue_size=200)
+tf = tf2_ros.TransformBroadcaster()
+static = tf2_ros.StaticTransformBroadcaster()
+
+def edge(stamp, parent, child, x=0.0, q=(0.0, 0.0, 0.0, 1.0)):
+    t = TransformStamped()
+    t.header.stamp, t.header.frame_id, t.child_frame_id = stamp, parent, child
+    t.transform.translation.x = x
+    r = t.transform.rotation
+    r.x, r.y, r.z, r.w = q
+    return t
+
+def scan(stamp, frame="laser", increment=0.01):
+    s = LaserScan()
+    s.header.stamp, s.header.frame_id = stamp, frame
+    s.angle_min, s.angle_increment = 0.5 if increment < 0 else -0.5, increment
+    s.angle_max = s.angle_min + 100 * increment
+    s.range_min, s.range_max, s.ranges = 0.05, 10.0, [0.5] * 101
+    scans.publish(s)
+
+time.sleep(1.5)
+start = rospy.Time.now()
+static.sendTransform([edge(start, "base_link", "laser", 0.2),
+                      edge(start, "base_link", "flipped", 0.2, (1.0, 0.0, 0.0, 0.0)),
+                      edge(start, "base_link", "tilted", 0.2, (0.0, math.sin(0.15), 0.0,
+                                                               math.cos(0.15)))])
+tf.sendTransform([edge(start, "map", "odom"), edge(start, "odom", "base_link", 1.0)])
+time.sleep(0.5)
+sent = time.monotonic()
+for _ in range(50):                       # 60 s behind the one transform the buffer holds
+    scan(start - rospy.Duration(60.0))
+print(f"stale sent in {time.monotonic() - sent:.2f} s")
+for k in range(1, 30):
+    tf.sendTransform([edge(start + rospy.Duration(0.1 * k), "map", "odom"),
+                      edge(start + rospy.Duration(0.1 * k), "odom", "base_link", 1.0)])
+    if k == 10:
+        now = start + rospy.Duration(0.5)
+        scan(now, increment=-0.01)        # a lidar that sweeps clockwise
+        scan(now, frame="flipped")        # one mounted upside down
+        scan(now, frame="tilted")         # one tilted 17 deg from level
+    time.sleep(0.05)
+time.sleep(1.0)
+print("sent")
+"""
+
+
+def test_clockwise_and_upside_down_scans_are_used_tilted_and_stale_ones_skipped_at_once(
+        ros, bags, tmp_path):
+    node = ros.node("__name:=turned", "--map", str(bags / "run/maps/M_W1.yaml"),
+                    "_publish_period:=0.3", name="turned")
+    started = time.monotonic()
+    assert "sent" in ros.run_script(TURNED_AND_STALE)
+    values = ros.health("turned", tmp_path / "d.json")
+    assert values["scans_received"] == "53" and values["scans_waiting"] == "0"
+    # each stale scan skipped at once: 50 waits of the tf timeout took 8 s before
+    assert int(values["skipped: no transform at the scan's time"]) + int(
+        values.get("skipped: scan older than the tf buffer", 0)) == 50
+    assert time.monotonic() - started < 9        # the script's 4.5 s, and no 10 s of waits
+    assert values["scans_used"] == "2" and values["scans_upside_down"] == "1"
+    assert values["skipped: laser neither upright nor upside down"] == "1"
+    ros.stop(node)
+    assert "Traceback" not in (ros.folder / "turned.log").read_text()
+
+
+FLOOD = r"""
+import sys, time
+import rospy
+from sensor_msgs.msg import LaserScan
+rospy.init_node("flooding_lidar", disable_signals=True)
+scans = rospy.Publisher("scan", LaserScan, queue_size=1000)
+time.sleep(1.5)
+n = int(sys.argv[1])
+for k in range(n):                                # large scans, as fast as rospy sends them
+    s = LaserScan()
+    s.header.stamp, s.header.frame_id = rospy.Time.now(), "laser"
+    s.angle_min, s.angle_increment, s.angle_max = -1.0, 1e-4, -1.0 + 19999e-4
+    s.range_min, s.range_max, s.ranges = 0.05, 10.0, [0.5] * 20000
+    scans.publish(s)
+time.sleep(3.0)
+print("sent")
+"""
+
+
+def test_a_flood_of_large_scans_is_accounted_for_scan_by_scan(ros, bags, tmp_path):
+    # 93 received, 54 used and none dropped or skipped, said the node before: the 39 others
+    # were waiting, unsaid
+    sent = 150
+    node = ros.node("__name:=flooded", "--map", str(bags / "run/maps/M_W1.yaml"),
+                    "_publish_period:=0.3", "_queue_size:=20", name="flooded")
+    out = subprocess.run([sys.executable, "-c", FLOOD, str(sent)], env=ros.env, text=True,
+                         capture_output=True, timeout=300)
+    assert "sent" in out.stdout, out.stderr
+    values = {k: int(v) for k, v in ros.health("flooded", tmp_path / "d.json").items()
+              if k.startswith(("scans_", "skipped"))}
+    skipped = sum(v for k, v in values.items() if k.startswith("skipped"))
+    assert values["scans_received"] == values.get("scans_used", 0) + skipped + \
+        values["scans_dropped_behind"] + values["scans_waiting"]
+    assert values["scans_received"] + values["scans_lost_in_transport"] == sent
+    ros.stop(node)
+
+
+def test_a_save_path_that_is_a_folder_is_refused_in_one_line(ros, bags):
+    p = subprocess.run([sys.executable, "-m", "mapupdate", "ros1", "--map",
+                        str(bags / "run/maps/M_W1.yaml"), "__name:=rooted", "_save_path:=/"],
+                       env=ros.env, text=True, capture_output=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines() == [
+        "mapupdate ros1: error: parameter '~save_path' must name a map file (.yaml), got the "
+        "folder '/'"]

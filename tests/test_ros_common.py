@@ -221,7 +221,7 @@ def test_tf_poses_interpolate_compose_and_wait_for_the_localisers_correction():
     # by hand: odom x 0.5, turned a quarter and shifted by map -> odom
     assert (odom.x, odom.y) == pytest.approx((0.5, 0.0))
     assert (robot.x, robot.y, robot.theta) == pytest.approx((10.0, 5.5, np.pi / 2))
-    assert p.mount("laser", 0.5).x == pytest.approx(0.25)
+    assert p.mount("laser", 0.5)[0].x == pytest.approx(0.25)
     assert p.mount("elsewhere", 0.5) is None
 
 
@@ -231,13 +231,25 @@ def test_tf_poses_take_a_corrected_static_mount_and_stay_bounded():
     p = TfPoses("map", "odom", "base_link", keep=5.0)
     p.add(_edge(0.0, "base_link", "laser", 0.25, static=True))
     p.add(_edge(0.0, "base_link", "laser", 0.40, static=True))      # corrected
-    assert p.mount("laser", 100.0).x == pytest.approx(0.40)
+    assert p.mount("laser", 100.0)[0].x == pytest.approx(0.40)
     for k in range(2000):                        # 200 s of odometry at 10 Hz
         p.add(_edge(0.1 * k, "odom", "base_link", 0.01 * k))
     samples = p._edges["base_link"][1]
     assert len(samples) <= 2 * 5.0 / 0.1 + 2     # about the last 2 x keep seconds
     assert p.at(199.9)[1].x == pytest.approx(19.99)
-    assert p.mount("laser", 199.9).x == pytest.approx(0.40)         # static edges survive
+    assert p.mount("laser", 199.9)[0].x == pytest.approx(0.40)      # static edges survive
+
+
+def test_tf_poses_stay_bounded_when_the_odometry_never_comes():
+    from robot.ros_common.poses import TfPoses
+
+    p = TfPoses("map", "odom", "base_misnamed", keep=5.0)
+    for k in range(9000):                        # 30 s at 300 Hz, no odom -> base_misnamed
+        p.add(_edge(k / 300, "odom", "base_link", 0.001 * k))
+        p.add(_edge(k / 300, "map", "odom", 0.0))
+    # about the last 2 x keep seconds of each edge, not all 18 000 transforms
+    assert p.samples() <= 2 * (2 * 5.0 * 300 + 2)
+    assert p.at(29.0) == (None, None)
 
 
 def test_the_scan_queue_drops_the_oldest_past_its_count_or_its_memory():
@@ -256,3 +268,138 @@ def test_the_scan_queue_drops_the_oldest_past_its_count_or_its_memory():
     assert len(q) == 5 and dropped == 95 and q.bytes <= 5 * big
     q = ScanQueue(max_items=10, max_bytes=1)                     # one scan past the bytes: kept
     assert q.push("huge", big) == 0 and len(q) == 1
+
+
+def _quaternion(roll=0.0, pitch=0.0, yaw=0.0):
+    """(x, y, z, w) of Rz(yaw) Ry(pitch) Rx(roll), the textbook formula."""
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+def _rotation(q):
+    x, y, z, w = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def test_quaternions_are_normalised_or_refused_as_tf2_does():
+    from robot.ros_common.transforms import TransformError, planar, unit_quaternion
+
+    q = _quaternion(yaw=np.pi / 2)
+    for scale in (2.0, 0.5):                     # the yaw 126.9 and 18.4 deg read before
+        with pytest.raises(TransformError, match="not unit"):
+            unit_quaternion(*(scale * v for v in q))
+    with pytest.raises(TransformError, match="not unit"):
+        unit_quaternion(0.0, 0.0, 0.0, 0.0)
+    with pytest.raises(TransformError, match="not unit"):
+        unit_quaternion(np.nan, 0.0, 0.0, 1.0)
+    near = unit_quaternion(*(1.004 * v for v in q))   # |n^2 - 1| < 0.01: normalised
+    assert np.linalg.norm(near) == pytest.approx(1.0)
+    assert planar(0.0, 0.0, near)[0].theta == pytest.approx(np.pi / 2)
+
+
+@pytest.mark.parametrize("roll, pitch, yaw, flipped, tilt", [
+    (0.0, 0.0, 0.7, False, 0.0), (np.pi, 0.0, 0.0, True, 0.0), (np.pi, 0.0, -2.0, True, 0.0),
+    (0.0, np.pi, 0.3, True, 0.0), (0.3, 0.0, 1.0, False, 0.3), (0.0, -0.2, 0.0, False, 0.2),
+    (np.pi - 0.1, 0.0, 0.5, True, 0.1)])
+def test_a_rotation_reduced_to_the_plane_says_upside_down_and_tilt(roll, pitch, yaw, flipped,
+                                                                   tilt):
+    from robot.ros_common.transforms import planar
+
+    q = _quaternion(roll, pitch, yaw)
+    pose, upside_down, got_tilt = planar(1.0, 2.0, q)
+    r = _rotation(q)
+    # the yaw is where the frame's x axis points, seen from above
+    assert pose.theta == pytest.approx(np.arctan2(r[1, 0], r[0, 0]))
+    assert (pose.x, pose.y) == (1.0, 2.0)
+    assert upside_down == flipped and got_tilt == pytest.approx(tilt, abs=1e-6)
+
+
+def test_an_upside_down_mount_places_each_beam_where_the_3d_transform_does():
+    from gridmap import Pose2D, Scan
+    from robot.ros_common.poses import TfPoses
+    from robot.ros_common.transforms import ascending, mirrored, planar
+
+    # base -> plate (rolled by pi, 0.3 m up, turned 0.4) -> laser (0.1 forward, 0.05 left
+    # of the plate, turned 0.2): the beams in 3D, against the node's planar reading
+    plate_q, laser_q = _quaternion(np.pi, 0.0, 0.4), _quaternion(0.0, 0.0, 0.2)
+    t = TfPoses("map", "odom", "base_link")
+    for child, parent, xy, q in (("plate", "base_link", (0.2, -0.1), plate_q),
+                                 ("laser", "plate", (0.1, 0.05), laser_q)):
+        pose, flipped, tilt = planar(*xy, q)
+        t.add(_edge(0.0, parent, child, pose.x, pose.y, pose.theta, static=True), flipped, tilt)
+    mount, flipped = t.mount("laser", 1.0)
+    assert flipped
+    scan = Scan(np.array([1.0, 2.0, 3.0], np.float32), -0.5, 0.5, 0.1, 10.0, 1.0)
+    seen = ascending(mirrored(scan))
+    got = [(mount.x + r * np.cos(mount.theta + a), mount.y + r * np.sin(mount.theta + a))
+           for r, a in zip(seen.ranges, seen.angles())]
+    r_plate, r_laser = _rotation(plate_q), _rotation(laser_q)
+    laser_in_base = np.array([0.2, -0.1, 0.0]) + r_plate @ np.array([0.1, 0.05, 0.0])
+    truth = [laser_in_base + r_plate @ r_laser @ np.array([r * np.cos(a), r * np.sin(a), 0.0])
+             for r, a in zip(scan.ranges, scan.angles())]
+    assert np.allclose(sorted(got), sorted((p[0], p[1]) for p in truth))
+    assert seen.angle_increment > 0 and mirrored(mirrored(scan)).angle_min == scan.angle_min
+
+
+def test_a_tilted_mount_is_refused():
+    from robot.ros_common.poses import TfPoses
+    from robot.ros_common.transforms import TransformError, planar
+
+    t = TfPoses("map", "odom", "base_link")
+    pose, flipped, tilt = planar(0.2, 0.0, _quaternion(0.0, 0.3, 0.0))   # pitched 17 deg
+    t.add(_edge(0.0, "base_link", "laser", pose.x, pose.y, pose.theta, static=True), flipped,
+          tilt)
+    with pytest.raises(TransformError, match="tilted 17.2 deg"):
+        t.mount("laser", 0.0, max_tilt=0.05)
+
+
+def test_a_clockwise_scan_is_the_same_beams_reversed():
+    from gridmap import Scan
+    from robot.ros_common.transforms import ascending
+
+    cw = Scan(np.array([1.0, 2.0, 3.0, 4.0], np.float32), 1.0, -0.25, 0.1, 10.0)
+    ccw = ascending(cw)
+    assert ccw.angle_increment == 0.25 and ccw.angle_min == pytest.approx(0.25)
+    pairs = sorted(zip(cw.angles().round(9), cw.ranges))
+    assert pairs == sorted(zip(ccw.angles().round(9), ccw.ranges))
+
+
+def test_sequence_gaps_count_the_messages_lost_on_the_way():
+    from robot.ros_common.gaps import Gaps
+
+    g = Gaps()
+    seen = [g.see("a", n) for n in (1, 2, 5, 6, 10)] + [g.see("b", n) for n in (7, 9)]
+    assert seen == [0, 0, 2, 0, 3, 0, 1] and g.lost == 6
+    assert g.see("a", 1) == 0 and g.see("a", 3) == 1         # a publisher started again
+    assert g.see("c", 2**64 - 1) == 0 and g.lost == 7         # not numbered: not counted
+
+
+def test_oversize_scans_and_scans_of_more_than_a_turn_are_skipped():
+    from robot.ros_common.scans import usable_scan
+
+    def scan(n, increment):
+        return NS(header=NS(stamp=NS(sec=5, nanosec=0), frame_id="laser"), ranges=[1.0] * n,
+                  angle_min=0.0, angle_increment=increment,
+                  angle_max=(n - 1) * increment, range_min=0.1, range_max=10.0, intensities=[])
+
+    assert usable_scan(scan(1000, 0.006), "/scan")[1] is None
+    assert usable_scan(scan(1000, 0.006), "/scan", max_beams=999)[1][0] == \
+        "scan with more beams than max_beams"
+    assert usable_scan(scan(1000, -0.006), "/scan")[1] is None          # clockwise: fine
+    assert usable_scan(scan(360, 2 * np.pi / 360), "/scan")[1] is None   # one whole turn
+    assert usable_scan(scan(1000, 1.08), "/scan")[1][0] == "scan spanning more than one turn"
+
+
+def test_the_save_path_is_checked_at_start(tmp_path):
+    from robot.ros_common.settings import check_save_path
+
+    check_save_path(str(tmp_path / "map.yaml"))
+    for path, words in (("/", "folder"), (str(tmp_path), "folder"),
+                        (str(tmp_path / "none" / "map.yaml"), "does not exist")):
+        with pytest.raises(NodeSettingsError, match=words):
+            check_save_path(path)

@@ -34,12 +34,15 @@ from robotlogs.rosbag import transform_pose
 from ..methods import make_method
 from ..pipeline import RobotPipeline, warm_up
 from ..robot_config import load_robot_config
+from ..ros_common.gaps import Gaps
 from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
 from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
-from ..ros_common.settings import NodeSettings, node_settings, refuse_saving_over_the_map
+from ..ros_common.settings import (NodeSettings, check_save_path, node_settings,
+                                   refuse_saving_over_the_map)
 from ..ros_common.store_link import StoreLink
+from ..ros_common.transforms import TransformError, ascending, mirrored, planar
 
 ROS_PACKAGES = ("ros-core python3-rospy python3-tf2-ros python3-nav-msgs python3-sensor-msgs "
                 "python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs "
@@ -77,6 +80,7 @@ class MapUpdaterNode:
         self.pipeline = None
         self._lock = threading.Lock()            # the pipeline, the published map
         self._queue = ScanQueue(settings.queue_size)
+        self._gaps = Gaps()                      # scans lost before the callback, by header.seq
         self._worker_stopped = ""                # why the scan worker ended, if it did
         self._wake = threading.Condition()
         self._published: np.ndarray | None = None
@@ -126,8 +130,13 @@ class MapUpdaterNode:
 
     # --- scans --------------------------------------------------------------------------------
     def _on_scan(self, msg, topic: str) -> None:
+        # rospy numbers each publisher's messages (header.seq): a jump is scans dropped on the
+        # way, in the publisher's or this subscriber's queue, which the node never sees
+        publisher = getattr(msg, "_connection_header", {}).get("callerid", "")
+        lost = self._gaps.see((topic, publisher), msg.header.seq)
         with self._wake:
             self.health.counts["scans_received"] += 1
+            self.health.counts["scans_lost_in_transport"] += lost
             dropped = self._queue.push((msg, topic), scan_bytes(msg.ranges, msg.intensities))
             self.health.counts["scans_dropped_behind"] += dropped
             self._wake.notify()
@@ -160,7 +169,7 @@ class MapUpdaterNode:
             self.health.times.append(time.perf_counter() - t0)
 
     def _handle(self, msg, topic: str) -> None:
-        rec, skip = usable_scan(msg, topic)
+        rec, skip = usable_scan(msg, topic, self.settings.max_beams)
         if skip is not None:
             return self._skip(*skip)
         if has_bad_ranges(rec):
@@ -170,9 +179,14 @@ class MapUpdaterNode:
         poses = self._poses(msg.header.stamp, rec.frame_id or self.settings.base_frame)
         if poses is None:
             return
-        robot, odom, mount = poses
+        robot, odom, (mount, flipped) = poses
+        scan = rec.scan
+        if flipped:                              # a lidar mounted upside down
+            scan = mirrored(scan)
+            self.health.counts["scans_upside_down"] += 1
         with self._lock:
-            self.pipeline.step(rec.scan, mount, odometry=odom, pose=robot)
+            # a clockwise lidar's beams (a negative angle_increment) in counter-clockwise order
+            self.pipeline.step(ascending(scan), mount, odometry=odom, pose=robot)
             self.health.counts["scans_used"] += 1
 
     def _poses(self, stamp, laser_frame: str):
@@ -182,8 +196,8 @@ class MapUpdaterNode:
         tf2 = self.ros["tf2_ros"]
         s = self.settings
         try:
-            map_odom = self._lookup(s.map_frame, s.odom_frame, stamp)
-            odom = self._lookup(s.odom_frame, s.base_frame, stamp)
+            map_odom = transform_pose(self._lookup(s.map_frame, s.odom_frame, stamp))
+            odom = transform_pose(self._lookup(s.odom_frame, s.base_frame, stamp))
             mount = self._mount(laser_frame, stamp)
         except tf2.ExtrapolationException as e:
             past = "past" in str(e)
@@ -191,31 +205,47 @@ class MapUpdaterNode:
                               else "no transform at the scan's time", e)
         except tf2.TransformException as e:
             return self._skip("no transform for the scan's frames", e)
+        except TransformError as e:
+            return self._skip("laser neither upright nor upside down", e)
         robot = map_odom.compose(odom)
-        if not (robot.is_finite() and odom.is_finite() and mount.is_finite()):
+        if not (robot.is_finite() and odom.is_finite() and mount[0].is_finite()):
             return self._skip("transform not finite", f"robot {robot}, laser mount {mount}")
         return robot, odom, mount
 
-    def _lookup(self, parent: str, child: str, stamp) -> Pose2D:
+    def _lookup(self, parent: str, child: str, stamp):
+        """The transform at ``stamp``, waited for ``tf_timeout`` only when it may still come:
+        a scan no newer than what the buffer holds already (a stale one) costs no waiting."""
         tf2 = self.ros["tf2_ros"]
         try:
-            ts = self.tf.lookup_transform(parent, child, stamp)
+            return self.tf.lookup_transform(parent, child, stamp).transform
         except tf2.ExtrapolationException as e:
-            if "past" in str(e):
-                raise                   # it will never come: a stale scan costs no waiting
-            ts = self.tf.lookup_transform(parent, child, stamp,
-                                          self.ros["rospy"].Duration(self.settings.tf_timeout))
+            if "past" in str(e) or not self._may_come(parent, child, stamp):
+                raise
         except tf2.TransformException:
-            ts = self.tf.lookup_transform(parent, child, stamp,
-                                          self.ros["rospy"].Duration(self.settings.tf_timeout))
-        return transform_pose(ts.transform)
+            pass
+        return self.tf.lookup_transform(parent, child, stamp, self.ros["rospy"].Duration(
+            self.settings.tf_timeout)).transform
 
-    def _mount(self, laser_frame: str, stamp) -> Pose2D:
+    def _may_come(self, parent: str, child: str, stamp) -> bool:
+        tf2 = self.ros["tf2_ros"]
+        try:
+            return stamp > self.tf.get_latest_common_time(parent, child)
+        except tf2.TransformException:
+            return True
+
+    def _mount(self, laser_frame: str, stamp) -> tuple[Pose2D, bool]:
+        """(the laser on the base, upside down); ``TransformError`` for one tilted more than
+        ``max_mount_tilt`` from level."""
         if laser_frame == self.settings.base_frame:
-            return Pose2D(0.0, 0.0, 0.0)
+            return Pose2D(0.0, 0.0, 0.0), False
         # at every scan's stamp: a corrected /tf_static counts from then on, and a mount that
-        # moves (on /tf) is taken where it was
-        return self._lookup(self.settings.base_frame, laser_frame, stamp)
+        # moves (on /tf) is taken where it was. tf2 has composed it in 3D
+        tr = self._lookup(self.settings.base_frame, laser_frame, stamp)
+        r = tr.rotation
+        pose, flipped, tilt = planar(tr.translation.x, tr.translation.y, (r.x, r.y, r.z, r.w))
+        if tilt > self.settings.max_mount_tilt:
+            raise TransformError(f"frame '{laser_frame}' is tilted {tilt:.3g} rad from level")
+        return pose, flipped
 
     def _skip(self, why: str, detail) -> None:
         self.health.skipped[why] += 1
@@ -270,12 +300,15 @@ class MapUpdaterNode:
 
     def _diagnostics(self, counts: dict) -> None:
         r = self.ros
+        self.health.counts["scans_waiting"] = len(self._queue)
         status = r["DiagnosticStatus"]()
         status.name = f"{r['rospy'].get_name()}: health"
         status.hardware_id = self.settings.map_frame
-        worrying = self.health.counts["scans_dropped_behind"] or sum(self.health.skipped.values())
+        c = self.health.counts
+        worrying = c["scans_dropped_behind"] or c["scans_lost_in_transport"] or \
+            sum(self.health.skipped.values())
         status.level = status.WARN if worrying else status.OK
-        status.message = "scans dropped or skipped" if worrying else "ok"
+        status.message = "scans dropped, lost or skipped" if worrying else "ok"
         if self._worker_stopped:                 # nothing is processed any more: never "ok"
             status.level = status.ERROR
             status.message = f"the scan worker stopped ({self._worker_stopped})"
@@ -389,6 +422,7 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
     _require_master()
     rospy.init_node("map_updater", argv=argv)
     settings, updater_config, pose_check_config = node_settings(rospy.get_param("~", {}), base)
+    check_save_path(settings.save_path)
     refuse_saving_over_the_map(settings.save_path, map_path)
     store = StoreLink(settings.store, settings.robot_name, settings.store_poll_period) \
         if settings.store else None

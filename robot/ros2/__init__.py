@@ -1,4 +1,4 @@
 """The live ROS 2 node (``mapupdate ros2``): a lifecycle node on the one robot pipeline
-(``node``), its parameters (``parameters``), and two small tools for a machine without the
-``ros2`` command: ``play`` replays a recording into the graph, ``trigger`` calls the node's
-services. Only these three modules import rclpy."""
+(``node``), its lifecycle services (``lifecycle``), its parameters (``parameters``), its
+services and publications (``services``) and its bond with Nav2's lifecycle manager
+(``bond``). Only these modules import rclpy and ROS 2's messages."""

@@ -14,6 +14,7 @@ class Health:
     def __init__(self):
         self.counts = collections.Counter()
         self.skipped = collections.Counter()     # why scans or maps were not used
+        self.notes: dict[str, str] = {}          # what a counter cannot say (a map switched)
         self.times: collections.deque = collections.deque(maxlen=500)   # [s] per scan
         # [s] from a scan's arrival to the end of its update (waiting for odometry included)
         self.latencies: collections.deque = collections.deque(maxlen=2000)
@@ -29,6 +30,7 @@ class Health:
             else:
                 out.append((k, str(v)))
         out += [(f"skipped: {k}", str(v)) for k, v in sorted(self.skipped.items())]
+        out += sorted(self.notes.items())
         if t.size:
             out += [("scan_time_ms_mean", f"{t.mean():.3f}"), ("scan_time_ms_max",
                                                               f"{t.max():.3f}")]

@@ -12,9 +12,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from gridmap import Pose2D
 from robotlogs.frames import TransformTree
 from robotlogs.records import TransformRecord
+
+from .transforms import TransformError, from_matrix, matrix
 
 MAP, ODOM, BASE = "map", "odom", "base"
 
@@ -89,33 +93,45 @@ class TfPoses:
     tf is read with (``robotlogs.observations.bag_poses``): each edge interpolated between its
     samples and held a little outside them, static edges held for ever. A static edge sent
     again replaces the old one (a corrected mount counts from then on). Samples older than
-    ``keep`` seconds behind the newest odometry are dropped."""
+    ``keep`` seconds behind the newest transform of any edge are dropped, so that edges pile
+    up no history even while the odometry never comes (a misnamed ``base_frame``). Each edge
+    keeps whether its child frame is upside down and how far it is tilted (``transforms``), so
+    that the laser's mount is composed as its 3D transforms compose."""
 
     def __init__(self, map_frame: str, odom_frame: str, base_frame: str, keep: float = 60.0):
         self.map_frame, self.odom_frame, self.base_frame = map_frame, odom_frame, base_frame
         self.keep = keep
         self._edges: dict[str, tuple[str, list]] = {}     # child -> (parent, [(t, pose)])
         self._static: dict[str, tuple[str, Pose2D]] = {}  # child -> (parent, pose)
+        self._attitude: dict[str, tuple[bool, float]] = {}  # child -> (upside down, tilt)
         self._tree = TransformTree()
         self.newest_odom = -math.inf
         self.newest_map = -math.inf
+        self.newest = -math.inf
 
-    def add(self, rec: TransformRecord) -> None:
+    def add(self, rec: TransformRecord, flipped: bool = False, tilt: float = 0.0) -> None:
         if rec.static:
             self._static[rec.child] = (rec.parent, rec.pose)
+            self._attitude[rec.child] = (flipped, tilt)
             self._rebuild()
             return
         parent, samples = self._edges.setdefault(rec.child, (rec.parent, []))
         if parent != rec.parent:             # tf's rule: a frame has one parent
             return
         samples.append((rec.time, rec.pose))
+        self._attitude[rec.child] = (flipped, tilt)
         self._tree.add(rec)
+        self.newest = max(self.newest, rec.time)
         if (rec.parent, rec.child) == (self.odom_frame, self.base_frame):
             self.newest_odom = max(self.newest_odom, rec.time)
-            if samples[0][0] < self.newest_odom - 2 * self.keep:
-                self._prune()
         elif (rec.parent, rec.child) == (self.map_frame, self.odom_frame):
             self.newest_map = max(self.newest_map, rec.time)
+        if samples[0][0] < self.newest - 2 * self.keep:
+            self._prune()
+
+    def samples(self) -> int:
+        """How many transforms are held (bounded by ``keep``)."""
+        return sum(len(s) for _, s in self._edges.values()) + len(self._static)
 
     def ready(self, t: float) -> bool:
         """Whether the odometry (and the localiser's correction, once one came) has passed
@@ -129,12 +145,45 @@ class TfPoses:
             else None
         return robot, odom
 
-    def mount(self, laser_frame: str, t: float) -> Pose2D | None:
-        """The laser's pose on the base at ``t`` (static edges hold for ever)."""
-        return self._tree.lookup(self.base_frame, laser_frame, t, hold=math.inf)
+    def mount(self, laser_frame: str, t: float, max_tilt: float = math.inf
+              ) -> tuple[Pose2D, bool] | None:
+        """(the laser's pose on the base, upside down) at ``t`` (static edges hold for ever);
+        None when the frames are not connected. ``TransformError`` when a frame on the way is
+        tilted by more than ``max_tilt`` [rad] (a 2D scan that is not level)."""
+        up_laser, up_base = self._chain(laser_frame), self._chain(self.base_frame)
+        common = next((f for f in up_laser if f in up_base), None)
+        if common is None:
+            return None
+        a = self._in_ancestor(up_laser, common, t, max_tilt)
+        b = self._in_ancestor(up_base, common, t, max_tilt)
+        if a is None or b is None:
+            return None
+        return from_matrix(np.linalg.solve(b, a))
+
+    def _chain(self, frame: str) -> list[str]:
+        chain, parent = [frame], self._tree.parent
+        while chain[-1] in parent and len(chain) <= len(parent):
+            chain.append(parent[chain[-1]])
+        return chain
+
+    def _in_ancestor(self, chain: list[str], ancestor: str, t: float, max_tilt: float):
+        m = np.eye(3)
+        for frame in chain[:chain.index(ancestor)]:
+            flipped, tilt = self._attitude.get(frame, (False, 0.0))
+            if tilt > max_tilt:
+                raise TransformError(f"frame '{frame}' is tilted {math.degrees(tilt):.1f} deg "
+                                     f"from level (upright and upside down are used; at most "
+                                     f"{math.degrees(max_tilt):.1f} deg, max_mount_tilt)")
+            edge = self._tree.static.get(frame)
+            if edge is None:
+                edge = self._tree.dynamic[frame].at(t, math.inf)
+                if edge is None:
+                    return None
+            m = matrix(edge, flipped) @ m
+        return m
 
     def _prune(self) -> None:
-        horizon = self.newest_odom - self.keep
+        horizon = self.newest - self.keep
         for child, (parent, samples) in self._edges.items():
             older = [s for s in samples if s[0] < horizon][-1:]
             samples[:] = older + [s for s in samples if s[0] >= horizon]

@@ -8,8 +8,10 @@ hands in its parameters as a nested dict.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 
 from gridmap import MapUpdatingError
 from gridmap.suggest import did_you_mean
@@ -19,12 +21,18 @@ from updater import UpdaterConfig
 from ..methods import ROBOT_METHODS, check_method
 from ..outputs import check_outputs, map_files, map_inputs
 from ..robot_config import ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config, section_config
+from .scans import MAX_BEAMS
 
 
 # A ROS topic name (ROS 1 and 2 agree on these): relative, absolute or private
 TOPIC_NAME = re.compile(r"[~/]?/?[A-Za-z][A-Za-z0-9_/]*")
 TOPIC_FIELDS = ("map_topic", "odom_topic", "pose_topic")
 POSE_SOURCES = ("tf", "amcl_pose")
+# [low, high] of the numeric parameters, checked here and declared as their ranges in ROS 2
+BOUNDS = {"publish_period": (0.01, 3600.0), "tf_timeout": (0.0, 10.0),
+          "smooth_poses": (0.0, 60.0), "store_poll_period": (0.1, 3600.0),
+          "max_mount_tilt": (0.0, 0.5), "queue_size": (1, 100_000),
+          "max_beams": (1, 1_000_000)}
 
 
 class NodeSettingsError(MapUpdatingError, ValueError):
@@ -50,6 +58,8 @@ class NodeSettings:
     store: str = ""                      # a map store (SQLite file or postgresql:// URL); "": none
     robot_name: str = ""                 # who commits to the store ("": the host's name)
     store_poll_period: float = 10.0      # [s] how often the store is asked for a newer version
+    max_beams: int = MAX_BEAMS           # a scan with more beams is skipped, counted
+    max_mount_tilt: float = 0.05         # [rad] a laser tilted more from level is not used
 
     def __post_init__(self):
         for name in ("map_frame", "odom_frame", "base_frame", "map_topic", "save_path"):
@@ -69,17 +79,19 @@ class NodeSettings:
             if not isinstance(getattr(self, name), str):
                 raise NodeSettingsError(f"parameter '~{name}' must be a string, got "
                                         f"{getattr(self, name)!r}")
-        for name, low, high in (("publish_period", 0.01, 3600.0), ("tf_timeout", 0.0, 10.0),
-                                ("smooth_poses", 0.0, 60.0), ("store_poll_period", 0.1, 3600.0)):
-            v = getattr(self, name)
+        for name in ("publish_period", "tf_timeout", "smooth_poses", "store_poll_period",
+                     "max_mount_tilt"):
+            (low, high), v = BOUNDS[name], getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or \
                     not (math.isfinite(v) and low <= v <= high):
+                unit = "rad" if name == "max_mount_tilt" else "s"
                 raise NodeSettingsError(f"parameter '~{name}' must be a number in "
-                                        f"[{low:g}, {high:g}] s, got {v!r}")
-        if isinstance(self.queue_size, bool) or not isinstance(self.queue_size, int) or \
-                not 1 <= self.queue_size <= 100_000:
-            raise NodeSettingsError(f"parameter '~queue_size' must be a whole number in "
-                                    f"[1, 100000], got {self.queue_size!r}")
+                                        f"[{low:g}, {high:g}] {unit}, got {v!r}")
+        for name in ("queue_size", "max_beams"):
+            (low, high), v = BOUNDS[name], getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+                raise NodeSettingsError(f"parameter '~{name}' must be a whole number in "
+                                        f"[{low}, {high}], got {v!r}")
         if not isinstance(self.use_pose_check, bool):
             raise NodeSettingsError(f"parameter '~use_pose_check' must be true or false, got "
                                     f"{self.use_pose_check!r}")
@@ -152,11 +164,30 @@ def node_settings(params: dict, base=None, kind: type = NodeSettings):
         # a topic named twice is one subscription, not every scan taken twice
         mine["scan_topics"] = (topics,) if isinstance(topics, str) else \
             tuple(dict.fromkeys(topics))
-    if isinstance(mine.get("publish_period"), int) and not isinstance(mine["publish_period"], bool):
-        mine["publish_period"] = float(mine["publish_period"])
+    for name in ("publish_period", "tf_timeout", "smooth_poses", "store_poll_period",
+                 "max_mount_tilt"):
+        if isinstance(mine.get(name), int) and not isinstance(mine[name], bool):
+            mine[name] = float(mine[name])        # YAML's 2 for 2.0
     if isinstance(mine.get("laser_mount"), list):
         mine["laser_mount"] = tuple(mine["laser_mount"])
     return replace(kind(), **mine), configs["updater"], configs["pose_check"]
+
+
+def check_save_path(save_path: str) -> None:
+    """Refuse, at start, a ``save_path`` that cannot be written: a folder, or a file in a
+    folder that does not exist or cannot be written to (found at start, not at the first
+    save, hours later)."""
+    path = Path(save_path)
+    if path.is_dir() or save_path.endswith(("/", os.sep)) or path.name in ("", ".", ".."):
+        raise NodeSettingsError(f"parameter '~save_path' must name a map file (.yaml), got the "
+                                f"folder {save_path!r}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise NodeSettingsError(f"parameter '~save_path': the folder {str(folder)!r} does not "
+                                "exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise NodeSettingsError(f"parameter '~save_path': the folder {str(folder)!r} cannot be "
+                                "written to")
 
 
 def refuse_saving_over_the_map(save_path: str, map_path) -> None:

@@ -1,13 +1,15 @@
 """Replays a recording into a ROS 2 graph, as a robot's drivers and amcl would send it, for a
-machine without ``ros2 bag``: LaserScan on /scan (sensor-data QoS) and the poses, by
+machine without ``ros2 bag`` (a tool of the repository, not of the installed package): LaserScan on /scan (sensor-data QoS) and the poses, by
 ``--poses``: "tf", the recording's /tf and, first and latched, its /tf_static (what the node's
 default ``pose_source`` reads; needs the tf2_msgs package ``make ros2`` builds); or
 "amcl_pose", Odometry on /odom and PoseWithCovarianceStamped on /amcl_pose (transient local, as
 Nav2's amcl). In the recording's time order, at ``--rate`` times real time, with the
 recording's stamps. It starts once every topic has a subscriber (a scan sent before would be
-lost).
+lost). ``--flip-laser``: as if the lidar were mounted upside down (rolled by pi) at the same
+place and yaw: its /tf_static mount says so, and each scan is sent as that lidar sees the same
+beams (each angle negated).
 
-    python -m robot.ros2.play BAG [--rate 1] [--poses tf|amcl_pose]
+    python ros/tools/play.py BAG [--rate 1] [--poses tf|amcl_pose] [--flip-laser]
 """
 
 from __future__ import annotations
@@ -39,12 +41,13 @@ def pose_msg(target, p) -> None:
     target.orientation.z, target.orientation.w = math.sin(p.theta / 2), math.cos(p.theta / 2)
 
 
-def scan_msg(r: ScanRecord) -> LaserScan:
+def scan_msg(r: ScanRecord, flip: bool = False) -> LaserScan:
     m, s = LaserScan(), r.scan
     stamp(m.header, r.time)
     m.header.frame_id = r.frame_id
-    m.angle_min, m.angle_increment = float(s.angle_min), float(s.angle_increment)
-    m.angle_max = float(s.angle_min + (s.beams - 1) * s.angle_increment)
+    sign = -1.0 if flip else 1.0
+    m.angle_min, m.angle_increment = sign * float(s.angle_min), sign * float(s.angle_increment)
+    m.angle_max = sign * float(s.angle_min + (s.beams - 1) * s.angle_increment)
     m.range_min, m.range_max = float(s.range_min), float(s.range_max)
     m.ranges = np.asarray(s.ranges, np.float32).tolist()
     return m
@@ -66,7 +69,8 @@ def amcl_msg(r: PoseRecord) -> PoseWithCovarianceStamped:
     return m
 
 
-def tf_msg(records):
+def tf_msg(records, flip_frames=()):
+    """``flip_frames``: the child frames rolled by pi (q = qz(yaw) qx(pi))."""
     from tf2_msgs.msg import TFMessage
     from geometry_msgs.msg import TransformStamped
     m = TFMessage()
@@ -75,22 +79,27 @@ def tf_msg(records):
         stamp(t.header, r.time)
         t.header.frame_id, t.child_frame_id = r.parent, r.child
         t.transform.translation.x, t.transform.translation.y = float(r.pose.x), float(r.pose.y)
-        t.transform.rotation.z = math.sin(r.pose.theta / 2)
-        t.transform.rotation.w = math.cos(r.pose.theta / 2)
+        c, s = math.cos(r.pose.theta / 2), math.sin(r.pose.theta / 2)
+        q = t.transform.rotation
+        if r.child in flip_frames:
+            q.x, q.y, q.z, q.w = c, s, 0.0, 0.0
+        else:
+            q.z, q.w = s, c
         m.transforms.append(t)
     return m
 
 
-def _publishers(node, poses: str) -> dict:
+def _publishers(node, poses: str, flip_frames=()) -> dict:
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                          reliability=ReliabilityPolicy.RELIABLE)
     pubs = {ScanRecord: (node.create_publisher(LaserScan, "scan", qos_profile_sensor_data),
-                         scan_msg)}
+                         lambda r: scan_msg(r, bool(flip_frames)))}
     if poses == "tf":
         from tf2_msgs.msg import TFMessage
         pubs[TransformRecord] = (node.create_publisher(TFMessage, "/tf", 100),
                                  lambda r: tf_msg([r]))
-        pubs["static"] = (node.create_publisher(TFMessage, "/tf_static", latched), tf_msg)
+        pubs["static"] = (node.create_publisher(TFMessage, "/tf_static", latched),
+                          lambda rs: tf_msg(rs, flip_frames))
     else:
         pubs[OdomRecord] = (node.create_publisher(Odometry, "odom", 50), odom_msg)
         pubs[PoseRecord] = (node.create_publisher(PoseWithCovarianceStamped, "amcl_pose",
@@ -119,13 +128,16 @@ def _records(bag: str, poses: str) -> tuple[list, list]:
     return records, static
 
 
-def main(bag: str, rate: float, poses: str = "tf") -> int:
+def main(bag: str, rate: float, poses: str = "tf", flip: bool = False) -> int:
     if not (math.isfinite(rate) and 0 < rate <= 1000):
         raise MapUpdatingError(f"--rate must be a number in (0, 1000], got {rate:g}")
     records, static = _records(bag, poses)
+    if flip and poses != "tf":
+        raise MapUpdatingError("--flip-laser needs --poses tf (the mount is on /tf_static)")
+    lasers = {r.frame_id for r in records if isinstance(r, ScanRecord)} if flip else set()
     rclpy.init()
     node = rclpy.create_node("recording_player")
-    pubs = _publishers(node, poses)
+    pubs = _publishers(node, poses, lasers)
     if static:
         pub, convert = pubs.pop("static")
         pub.publish(convert(static))
@@ -151,15 +163,17 @@ def main(bag: str, rate: float, poses: str = "tf") -> int:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(prog="python -m robot.ros2.play",
+    ap = argparse.ArgumentParser(prog="ros/tools/play.py",
                                  description="replay a recording into a ROS 2 graph")
     ap.add_argument("bag", help="ROS 1 bag or ROS 2 bag folder")
     ap.add_argument("--rate", type=float, default=1.0, help="times real time (1)")
     ap.add_argument("--poses", default="tf", choices=("tf", "amcl_pose"),
                     help="/tf and /tf_static (tf), or /odom and /amcl_pose")
+    ap.add_argument("--flip-laser", action="store_true",
+                    help="as if the lidar were mounted upside down at the same place")
     a = ap.parse_args()
     try:
-        sys.exit(main(a.bag, a.rate, a.poses))
+        sys.exit(main(a.bag, a.rate, a.poses, a.flip_laser))
     except (MapUpdatingError, OSError) as e:
-        print(f"robot.ros2.play: error: {' '.join(str(e).split())}", file=sys.stderr)
+        print(f"play.py: error: {' '.join(str(e).split())}", file=sys.stderr)
         sys.exit(2)

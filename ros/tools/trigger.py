@@ -1,7 +1,8 @@
 """Calls a ``std_srvs/Trigger`` service (the node's ``~/save``, ``~/commit``, ``~/reset``) and
-prints its answer, for a machine without the ``ros2`` command; exit 1 when it says no.
+prints its answer, for a machine without the ``ros2`` command (a tool of the repository, not
+of the installed package); exit 1 when it says no.
 
-    python -m robot.ros2.trigger /map_updater/save
+    python ros/tools/trigger.py /map_updater/save
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def call(service: str, timeout: float = 30.0) -> tuple[bool, str]:
 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
-        sys.exit("usage: python -m robot.ros2.trigger SERVICE")
+        sys.exit("usage: python ros/tools/trigger.py SERVICE")
     ok, message = call(sys.argv[1])
     print(f"{'success' if ok else 'failed'}: {message}")
     sys.exit(0 if ok else 1)

@@ -179,9 +179,13 @@ def call(srv, service, **fields):
     client = node.create_client(srv, f"/{name}/{service}")
     assert client.wait_for_service(timeout_sec=60), service
     request = srv.Request(**fields)
-    future = client.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=30)
-    return future.result()
+    for _ in range(9):      # idempotent: asked again while the reply's path is not matched
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(node, future, timeout_sec=10)
+        if future.done():
+            return future.result()
+        client.remove_pending_request(future)
+    raise SystemExit(f"no answer from {service}")
 
 listed = call(ListParameters, "list_parameters").result.names
 described = call(DescribeParameters, "describe_parameters", names=wanted).descriptors

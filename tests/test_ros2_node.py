@@ -305,12 +305,18 @@ change = client.create_client(ChangeState, f"/{node_name}/change_state")
 get = client.create_client(GetState, f"/{node_name}/get_state")
 assert change.wait_for_service(timeout_sec=60) and get.wait_for_service(timeout_sec=60)
 
-def call(c, request):
-    future = c.call_async(request)
-    rclpy.spin_until_future_complete(client, future, timeout_sec=30)
-    return future.result()
+def call(c, request, tries=1):
+    # a service found may not answer its first request yet (the reply's reader not yet
+    # matched): the idempotent first get_state is asked again until it is answered
+    for _ in range(tries):
+        future = c.call_async(request)
+        rclpy.spin_until_future_complete(client, future, timeout_sec=30 if tries == 1 else 10)
+        if future.done():
+            return future.result()
+        c.remove_pending_request(future)
+    raise SystemExit(f"no answer from {c.srv_name}")
 
-out = [call(get, GetState.Request()).current_state.label]
+out = [call(get, GetState.Request(), tries=9).current_state.label]
 for transition_id in steps:
     request = ChangeState.Request()
     request.transition.id = transition_id

@@ -76,3 +76,39 @@ def config_from_yaml(cls, path, error: type[Exception], section: str, *also: str
     if isinstance(values, dict) and len(values) == 1 and next(iter(values)) in (section, *also):
         values = next(iter(values.values())) or {}
     return config_from_dict(cls, values, error, str(path))
+
+
+# --- profiles ---------------------------------------------------------------------------------
+# Two named sets of defaults for every configuration: ``paper`` (the paper and its authors'
+# code: each class's own defaults) and ``robot`` (what a robot should run: the class's
+# defaults with the keys of its module's ``ROBOT_PROFILE`` changed). docs/configuration.md
+# lists every key where they differ and why.
+PROFILES = ("paper", "robot")
+DEFAULT_PROFILE = "robot"
+
+
+def check_profile(name, error: type[Exception], where: str = "profile") -> str:
+    """``name`` if it names a profile, else an ``error`` naming it, the nearest profile and
+    the profiles there are."""
+    if not isinstance(name, str) or name not in PROFILES:
+        raise error(f"{where}: unknown profile {name!r}{did_you_mean(str(name), PROFILES)} "
+                    f"(profiles: {', '.join(PROFILES)})")
+    return name
+
+
+def profile_values(robot_profile: dict, name: str) -> dict:
+    """The keys a profile sets over the class's defaults: none for ``paper``, the values of
+    ``robot_profile`` ({key: (value, why)}) for ``robot``."""
+    return {k: v for k, (v, _why) in robot_profile.items()} if name == "robot" else {}
+
+
+def config_from_profile(cls, robot_profile: dict, name: str, overrides: dict | None,
+                        error: type[Exception], source: str | None = None):
+    """``cls`` with the profile ``name``'s values, then ``overrides`` key by key (checked as
+    ``config_from_dict`` checks a mapping)."""
+    check_profile(name, error)
+    if overrides is not None and not isinstance(overrides, dict):
+        raise error(f"{source or 'config'}: expected a mapping of keys, got "
+                    f"{type(overrides).__name__}")
+    values = {**profile_values(robot_profile, name), **(overrides or {})}
+    return config_from_dict(cls, values, error, source or f"profile '{name}'")

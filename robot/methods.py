@@ -82,11 +82,12 @@ def check_method(name, source: str = "method", choices=METHODS) -> str:
 
 def make_method(name: str, reference: OccupancyGrid, updater_config=None):
     """The method ``name`` on the reference map M_{i-1}. ``updater_config``: an
-    ``updater.UpdaterConfig`` (None: its defaults); the baselines use its gating rules."""
+    ``updater.UpdaterConfig`` (None: the robot profile's); the baselines use its gating
+    rules."""
     check_method(name)
+    config = UpdaterConfig.profile() if updater_config is None else updater_config
     if name == "paper":
-        return MapUpdater(reference, updater_config)
-    config = UpdaterConfig() if updater_config is None else updater_config
+        return MapUpdater(reference, config)
     if name == "none":
         return KeepMap(reference, config)
     if name == "hybrid":

@@ -38,6 +38,7 @@ class PipelineCounts:
     scans_processed: int = 0              # classified by the updater (lost ones included)
     scans_dropped_as_lost: int = 0        # classified, then dropped by the lost check
     scans_refused_by_pose_check: int = 0  # the pose check refused their pose
+    scans_corrected_by_pose_check: int = 0   # ... placed them at a pose that fits better
     scans_gated: int = 0                  # not processed: the updater's gate refused them
     gated_by: dict = field(default_factory=dict)   # ... by the gate's rule (ScanReport.reason)
     scans_confirming: int = 0             # ... of them, used to confirm M (gate_confirm)
@@ -115,10 +116,12 @@ class RobotPipeline:
         t0 = time.process_time()
         check = None if self.pose_check is None else partial(
             self.pose_check.verdict, scan, robot, mount, cov)
-        report = self.updater.process(scan, robot.compose(mount), odometry=odometry,
-                                      pose_check=check)
+        given = robot.compose(mount)
+        report = self.updater.process(scan, given, odometry=odometry, pose_check=check)
         self.cpu["updater_s"] += time.process_time() - t0
         self._count(report)
+        self.counts.scans_corrected_by_pose_check += (
+            report.processed and report.sensor_pose is not None and report.sensor_pose != given)
         if self.tracking is not None and report.processed:
             self.tracking.observe_lost(report.dropped_as_lost, float(scan.time))
         return Step(robot, report)

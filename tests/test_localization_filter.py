@@ -164,7 +164,7 @@ def test_set_map_swaps_the_map_live(world, tour):
             assert loc.grid is shifted
             assert np.array_equal(loc.particles, seen["particles"])
             assert loc.estimate() is seen["estimate"]
-    loc = MonteCarloLocalizer(world.map, seed=0)
+    loc = MonteCarloLocalizer(world.map, seed=0, profile="paper")
     loc.initialize(tour[0][0], START_COV)
     offsets = []
     for i, (truth, odom, scan) in enumerate(tour):
@@ -184,7 +184,7 @@ def test_set_map_swaps_the_map_live(world, tour):
 def test_same_seed_same_particles_bit_for_bit(world, tour):
     runs = []
     for seed in (5, 5, np.random.SeedSequence(5), 6):
-        loc = MonteCarloLocalizer(world.map, seed=seed)
+        loc = MonteCarloLocalizer(world.map, seed=seed, profile="paper")
         loc.initialize(tour[0][0], START_COV)
         for truth, odom, scan in tour[:120]:
             loc.update(odom, scan, world.lidar.mount)
@@ -208,7 +208,7 @@ def test_no_global_random_state_is_touched(world, tour):
 
 
 def test_update_schedule_and_map_to_odom(world, tour):
-    loc = MonteCarloLocalizer(world.map, seed=0)
+    loc = MonteCarloLocalizer(world.map, seed=0, profile="paper")
     start = tour[0][0]
     loc.initialize(start, START_COV)
     assert loc.estimate().correction_odom == Pose2D(0.0, 0.0, 0.0)
@@ -233,7 +233,7 @@ def test_update_schedule_and_map_to_odom(world, tour):
 
 
 def test_initialisation(world):
-    loc = MonteCarloLocalizer(world.map, seed=3)
+    loc = MonteCarloLocalizer(world.map, seed=3, profile="paper")
     with pytest.raises(LocalizationError, match="initialize"):
         loc.update(Pose2D(0, 0, 0), syn.Lidar().scan(world.truth, world.route[0],
                                                      np.random.default_rng(0)), Pose2D(0, 0, 0))
@@ -254,7 +254,7 @@ def test_initialisation(world):
     with pytest.raises(LocalizationError, match="config"):
         MonteCarloLocalizer(world.map, config={"alpha1": 0.1})
     with pytest.raises(LocalizationError, match="seed"):
-        MonteCarloLocalizer(world.map, seed=1.5)
+        MonteCarloLocalizer(world.map, seed=1.5, profile="paper")
 
 
 def test_a_scan_without_valid_beams_leaves_the_weights(world, tour):

@@ -153,7 +153,7 @@ def test_pose_at_is_the_runner_convention(sessions):
     """Between filter updates the pose is the latest correction composed with the odometry
     since then; at an update it is the estimate itself."""
     w2 = sessions("W2")
-    loc = MonteCarloLocalizer(w2.truth, seed=0)
+    loc = MonteCarloLocalizer(w2.truth, seed=0, profile="paper")
     loc.initialize(w2.scans[0][0], START_COV)
     for truth, odom, scan, mount in w2.scans[:200]:
         updated = loc.update(odom, scan, mount)

@@ -149,7 +149,7 @@ def test_one_nan_odometry_message_is_skipped_counted_and_the_update_goes_on(room
 def test_tracking_verdict_from_the_spreads_and_the_scan(room_bags):
     d, steps = room_bags
     grid = load_map(d / "map.yaml")
-    loc = MonteCarloLocalizer(grid, seed=0)
+    loc = MonteCarloLocalizer(grid, seed=0, profile="paper")
     loc.initialize(steps[0][1], np.diag([0.01, 0.01, 0.001]))
     monitor = TrackingMonitor(grid)
     assert monitor.tracking and monitor.doubt(loc.estimate()) == ""
@@ -225,11 +225,11 @@ def test_without_a_tracking_verdict_the_jump_frees_walls(jump):
     """The failure the verdict exists for: the localiser, fed the jump as motion, diverges and
     the update it feeds frees cells of walls and racks."""
     grid = load_map(jump / "run/maps/M_W1.yaml")
-    updater = MapUpdater(grid)
+    updater = MapUpdater(grid, profile="paper")
     pipeline = RobotPipeline(updater)
     for obs in log_observations(jump / "jump.bag").observations:
         if pipeline.localizer is None:
-            pipeline.localizer = MonteCarloLocalizer(grid, seed=0)
+            pipeline.localizer = MonteCarloLocalizer(grid, seed=0, profile="paper")
             pipeline.localizer.initialize(obs.recorded, np.diag([0.0625, 0.0625, 0.01]))
         pipeline.step(obs.scan, obs.mount, odometry=obs.odom)
     assert _walls_freed(jump, updater.updated_map().data) > 10

@@ -10,7 +10,7 @@ import pytest
 from gridmap import FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid
 from robot.methods import METHODS, MethodError, check_method, make_method
 from robot.pipeline import RobotPipeline
-from updater import MapMethod, MapUpdater
+from updater import UpdaterConfig, MapMethod, MapUpdater
 
 try:
     import synthetic_room as world
@@ -39,7 +39,7 @@ def maps():
     shapes = world.room_walls() + [ADDED]
     out = {}
     for name in METHODS:
-        pipeline = RobotPipeline(make_method(name, reference()))
+        pipeline = RobotPipeline(make_method(name, reference(), UpdaterConfig()))
         for true, noisy, t in world.Drive(seconds=40.0, seed=1).steps():
             pipeline.step(world.full_scan(shapes, true, t), world.Pose2D(0.0, 0.0, 0.0),
                           odometry=true, pose=noisy)
@@ -148,7 +148,7 @@ def _drive(method, reference_map, shapes, seed=1, seconds=40.0):
     pipeline and the detected-change hit points (x, y) of the scans the updater processed."""
     from updater import BEAM_CHANGE, ScanStatus
 
-    pipeline = RobotPipeline(make_method(method, reference_map))
+    pipeline = RobotPipeline(make_method(method, reference_map, UpdaterConfig()))
     hits = []
     for true, noisy, t in world.Drive(seconds=seconds, seed=seed).steps():
         scan = world.full_scan(shapes, true, t)
@@ -217,7 +217,7 @@ def test_hybrid_maps_asked_for_at_every_scan_end_as_one_asked_for_at_the_end(map
     """Its output is worked out when asked and kept until the next processed scan: asking for
     it (and scribbling on the copy it returns) at every scan changes nothing."""
     shapes = world.room_walls() + [ADDED]
-    pipeline = RobotPipeline(make_method("hybrid", reference()))
+    pipeline = RobotPipeline(make_method("hybrid", reference(), UpdaterConfig()))
     for true, noisy, t in world.Drive(seconds=40.0, seed=1).steps():
         pipeline.step(world.full_scan(shapes, true, t), world.Pose2D(0.0, 0.0, 0.0),
                       odometry=true, pose=noisy)

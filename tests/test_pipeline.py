@@ -51,7 +51,7 @@ class Refuse:
 
 def test_given_poses_are_composed_with_the_mount_once_and_free_the_removed_box():
     _, ref = scene()
-    via_pipeline, direct = MapUpdater(ref), MapUpdater(ref)
+    via_pipeline, direct = MapUpdater(ref, profile="paper"), MapUpdater(ref, profile="paper")
     pipeline = RobotPipeline(via_pipeline)
     for robot, scan in drive():
         step = pipeline.step(scan, MOUNT, odometry=robot, pose=robot)
@@ -69,7 +69,7 @@ def test_given_poses_are_composed_with_the_mount_once_and_free_the_removed_box()
 def test_refusals_are_counted_from_the_typed_verdict_and_change_nothing():
     _, ref = scene()
     check = Refuse()
-    pipeline = RobotPipeline(MapUpdater(ref), pose_check=check)
+    pipeline = RobotPipeline(MapUpdater(ref, profile="paper"), pose_check=check)
     statuses = [pipeline.step(scan, MOUNT, odometry=robot, pose=robot).report.status
                 for robot, scan in drive()]
     c = pipeline.counts
@@ -82,7 +82,7 @@ def test_refusals_are_counted_from_the_typed_verdict_and_change_nothing():
 def test_without_a_pose_or_odometry_a_scan_is_counted_and_skipped():
     _, ref = scene()
     robot, scan = next(drive())
-    pipeline = RobotPipeline(MapUpdater(ref))
+    pipeline = RobotPipeline(MapUpdater(ref, profile="paper"))
     step = pipeline.step(scan, MOUNT, odometry=robot)           # no localiser, no pose
     assert step.report is None and step.robot_pose is None
     loc = MonteCarloLocalizer(ref, LocalizerConfig(), seed=1)
@@ -104,7 +104,7 @@ def test_with_a_localiser_the_updater_gets_its_estimate_and_the_check_its_covari
         def verdict(self, scan, robot, mount, cov=None):
             seen.append((robot, cov))
             return super().verdict(scan, robot, mount, cov)
-    pipeline = RobotPipeline(MapUpdater(ref), loc, Spy(ref))
+    pipeline = RobotPipeline(MapUpdater(ref, profile="paper"), loc, Spy(ref))
     errors = []
     for robot, scan in drive():
         step = pipeline.step(scan, MOUNT, odometry=robot, pose=Pose2D(0.0, 0.0, 0.0))
@@ -163,13 +163,13 @@ class Shift:
 def test_the_report_carries_the_sensor_pose_the_scan_was_placed_at():
     _, ref = scene()
     (robot, scan), *_ = drive(1)
-    plain = RobotPipeline(MapUpdater(ref)).step(scan, MOUNT, odometry=robot, pose=robot)
+    plain = RobotPipeline(MapUpdater(ref, profile="paper")).step(scan, MOUNT, odometry=robot, pose=robot)
     assert plain.report.sensor_pose == robot.compose(MOUNT)
-    refined = RobotPipeline(MapUpdater(ref), pose_check=Shift()).step(scan, MOUNT,
+    refined = RobotPipeline(MapUpdater(ref, profile="paper"), pose_check=Shift()).step(scan, MOUNT,
                                                                       odometry=robot, pose=robot)
     expected = robot.compose(MOUNT)
     assert refined.report.status is ScanStatus.PROCESSED
     assert refined.report.sensor_pose == Pose2D(expected.x, expected.y + 0.03, expected.theta)
-    refused = RobotPipeline(MapUpdater(ref), pose_check=Shift(refuse=True)).step(
+    refused = RobotPipeline(MapUpdater(ref, profile="paper"), pose_check=Shift(refuse=True)).step(
         scan, MOUNT, odometry=robot, pose=robot)
     assert refused.report.status is ScanStatus.REFUSED and refused.report.sensor_pose is None

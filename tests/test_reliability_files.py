@@ -28,7 +28,6 @@ from mapupdate import main
 from mapupdate.summaries import update_lines
 from robot.pipeline import RobotPipeline
 from robot.replay import LogSource, Outputs, Placement, update_from_log
-from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from robot.ros_common.scans import usable_scan
 from robotlogs.carmen import read_carmen
 from robotlogs.records import LogError
@@ -42,7 +41,7 @@ except ImportError:  # tests collected as a package
     from tests import synthetic_room as world
     from tests.test_reliability_hostile import refused, time_limit
 
-ROBOT = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+ROBOT = UpdaterConfig.profile("robot")
 BOX = world.Rect(5.2, 5.2, 5.8, 5.8)      # in the map, gone from the room
 
 
@@ -383,7 +382,7 @@ def node_updaters():
     from localization.confidence import PoseCheck
     grid = world.rasterise(world.room_walls() + [BOX])
     pipeline = RobotPipeline(MapUpdater(grid, ROBOT), pose_check=PoseCheck(grid))
-    ungated = MapUpdater(grid, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "gating": False}))
+    ungated = MapUpdater(grid, UpdaterConfig.profile("robot", {"gating": False}))
     scan, pose = step_scan()
     pipeline.step(scan, Pose2D(0.0, 0.0, 0.0), odometry=pose, pose=pose)
     ungated.process(scan, pose)

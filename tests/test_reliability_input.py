@@ -115,7 +115,7 @@ def test_a_save_that_fails_or_is_interrupted_leaves_the_previous_map(tmp_path, m
 
 def test_truncated_or_foreign_updater_state_is_an_updater_error(tmp_path):
     walls, ref = room()
-    u = MapUpdater(ref)
+    u = MapUpdater(ref, profile="paper")
     u.process(world.full_scan(walls, CENTRE, 0.0), CENTRE)
     u.save(tmp_path / "s.npz")
     raw = (tmp_path / "s.npz").read_bytes()
@@ -156,7 +156,7 @@ def test_localiser_treats_bad_ranges_like_missing_returns():
     for values in (np.full(idx.size, np.inf), np.resize(list(BAD.values()), idx.size)):
         ranges = scan.ranges.copy()
         ranges[idx] = values
-        loc = MonteCarloLocalizer(ref, seed=3)
+        loc = MonteCarloLocalizer(ref, seed=3, profile="paper")
         loc.initialize(CENTRE, np.diag([0.02, 0.02, 0.01]))
         s = Scan(ranges, scan.angle_min, scan.angle_increment, 0.05, 20.0, 0.0)
         loc.update(Pose2D(0, 0, 0), s, Pose2D(0, 0, 0))
@@ -237,7 +237,7 @@ def test_poses_off_the_map_crash_nothing_and_change_nothing():
     walls, ref = room()
     scan = world.full_scan(walls, CENTRE, 0.0)
     far = Pose2D(-40.0, 60.0, 1.0)
-    loc = MonteCarloLocalizer(ref, seed=1)
+    loc = MonteCarloLocalizer(ref, seed=1, profile="paper")
     loc.initialize(far, np.diag([0.01, 0.01, 0.01]))
     loc.update(Pose2D(0, 0, 0), scan, Pose2D(0, 0, 0))
     assert loc.update(Pose2D(0.5, 0, 0), scan, Pose2D(0, 0, 0))
@@ -246,7 +246,7 @@ def test_poses_off_the_map_crash_nothing_and_change_nothing():
     mapper.add_scan(scan, far)                  # every beam misses the grid
     assert not mapper.logodds.any()
     assert PoseCheck(ref).check(scan, far, Pose2D(0, 0, 0)) == ""   # nothing to fit: no verdict
-    u = MapUpdater(ref)
+    u = MapUpdater(ref, profile="paper")
     assert u.process(scan, far).reason == "sensor off the map"
     assert u.stats["skipped"] == 1 and not u.change_counts().any()
 
@@ -310,7 +310,7 @@ def test_no_scan_in_the_time_window_is_an_error_not_an_unchanged_map(tmp_path):
 def test_updater_gates_a_repeated_or_earlier_scan_and_it_changes_nothing():
     walls, ref = room()
     box = world.Rect(7.0125, 5.0125, 7.6125, 5.8125)
-    u = MapUpdater(ref)
+    u = MapUpdater(ref, profile="paper")
     odom = Pose2D(0, 0, 0)
     first = world.full_scan(walls + [box], CENTRE, 10.0)
     assert u.process(first, CENTRE, odometry=odom).processed
@@ -330,7 +330,7 @@ def test_updater_gates_a_repeated_or_earlier_scan_and_it_changes_nothing():
 def test_localiser_ignores_a_repeated_odometry_pose():
     walls, ref = room()
     scan = world.full_scan(walls, CENTRE, 0.0)
-    loc = MonteCarloLocalizer(ref, seed=5)
+    loc = MonteCarloLocalizer(ref, seed=5, profile="paper")
     loc.initialize(CENTRE, np.diag([0.01, 0.01, 0.005]))
     odom = Pose2D(1.0, 2.0, 0.1)
     assert not loc.update(odom, scan, Pose2D(0, 0, 0))      # first call: odometry only

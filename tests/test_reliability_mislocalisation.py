@@ -175,7 +175,7 @@ def test_in_the_updater_a_refused_pose_is_scored_once_per_retry_interval():
     walls, ref = room()
     check = PoseCheck(ref)
     fits = _counted(check)
-    u = MapUpdater(ref)
+    u = MapUpdater(ref, profile="paper")
     reasons = []
     for k in range(20):                                       # 2 s at 10 Hz, 0.05 m per scan
         scan = world.full_scan(walls + [BOX], CENTRE, 0.1 * k)
@@ -198,7 +198,7 @@ def test_updater_asks_the_check_only_after_the_gate_and_a_refusal_changes_nothin
     def check():
         calls.append(1)
         return answer[0]
-    u = MapUpdater(ref)
+    u = MapUpdater(ref, profile="paper")
     odom = [Pose2D(0.1 * k, 0.0, 0.0) for k in range(12)]    # 0.1 m per scan, 10 Hz
     reports = [u.process(world.full_scan(walls + [BOX], CENTRE, 0.1 * k), CENTRE,
                          odometry=odom[k], pose_check=check) for k in range(6)]
@@ -304,7 +304,7 @@ def test_the_updater_uses_the_sensor_pose_the_check_returns():
     walls, ref = room()
     scans = [world.full_scan(walls + [BOX], CENTRE, 0.5 * k) for k in range(4)]
     odom = [Pose2D(0.5 * k, 0.0, 0.0) for k in range(4)]
-    plain, told = MapUpdater(ref), MapUpdater(ref)
+    plain, told = MapUpdater(ref, profile="paper"), MapUpdater(ref, profile="paper")
     wrong = Pose2D(CENTRE.x + 0.3, CENTRE.y - 0.2, CENTRE.theta + 0.1)
     for k, scan in enumerate(scans):
         a = plain.process(scan, CENTRE, odometry=odom[k])

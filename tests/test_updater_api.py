@@ -311,6 +311,6 @@ def test_updater_imports_only_gridmap_and_numba_lazily():
 def test_reference_map_is_copied():
     data = np.zeros((20, 20), np.int8)
     grid = OccupancyGrid(data, 0.05)
-    u = MapUpdater(grid)
+    u = MapUpdater(grid, profile="paper")
     grid.data[3, 3] = 100
     assert u.reference_map.data[3, 3] == 0 and u.updated_map().data[3, 3] == 0

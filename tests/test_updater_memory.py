@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from gridmap import UNKNOWN, OccupancyGrid
-from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import MapUpdater, UpdaterConfig, UpdaterError, steps
 from updater import _kernels as K
 from updater.hit_tiles import HitTiles
@@ -34,7 +33,7 @@ from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 
 BAR_BYTES = 16e6
 # update's defaults as the code kept in benchmarks/updater_before can run them
-ROBOT_AS_BEFORE = {**ROBOT_UPDATER_DEFAULTS, **AS_BEFORE}
+ROBOT_AS_BEFORE = {**UpdaterConfig.profile("robot").to_dict(), **AS_BEFORE}
 SIZE = 2000
 
 
@@ -65,7 +64,7 @@ def state_after_scans(config: UpdaterConfig, session, workspace: bool = True) ->
 
 def test_a_2000_map_with_the_unanimous_rule_stays_within_16_mb(session):
     # the decision rules of mapupdate update: the unanimous rule counts each cell's flags
-    rules = UpdaterConfig(gating=False, unanimous_min=ROBOT_UPDATER_DEFAULTS["unanimous_min"])
+    rules = UpdaterConfig(gating=False, unanimous_min=UpdaterConfig.profile("robot").unanimous_min)
     assert steps.count_shift(rules) == rules.buffer_size
     assert state_after_scans(rules, session) <= BAR_BYTES
 
@@ -74,8 +73,8 @@ def test_the_flag_counts_take_no_bytes_with_the_robots_defaults(session):
     """With the growth into the unknown, its hit buffers (two bytes a cell) come on top: the
     counts add nothing to them. (The workspace aside: uncounted, a free cell's buffer is
     settled sooner, so fewer flags are made and listed.)"""
-    robot = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
-    uncounted = UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, "unanimous_min": 0,
+    robot = UpdaterConfig.profile("robot")
+    uncounted = UpdaterConfig.profile("robot", {"unanimous_min": 0,
                                  "spread_removed": False})
     assert state_after_scans(robot, session, False) == \
         state_after_scans(uncounted, session, False)
@@ -86,7 +85,7 @@ def test_a_2000_map_with_the_update_defaults_stays_within_16_mb(session):
     tiles where the scans hit open unknown space, not two bytes for every cell."""
     ref, scans, _ = session
     updater = MapUpdater(embedded(unknown_corner(ref), SIZE),
-                         UpdaterConfig(**ROBOT_UPDATER_DEFAULTS))
+                         UpdaterConfig.profile("robot"))
     for scan, noisy, true in scans:
         updater.process(scan, noisy, odometry=true)
     assert updater._hits.used > 0 and len(updater.drawn_cells()[0]) > 0   # it grew
@@ -110,7 +109,7 @@ def test_tiled_hit_buffers_follow_a_plain_dense_rule_to_the_edges_of_the_map():
     rng = np.random.default_rng(3)
     shape = (130, 200)                       # neither side a whole number of tiles
     ref = rng.choice(np.array([UNKNOWN, 0, 100], np.int8), size=shape, p=[0.6, 0.3, 0.1])
-    cfg = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+    cfg = UpdaterConfig.profile("robot")
     mask = steps.buffer_mask(cfg)
     tiles = HitTiles(shape)
     enclosed = np.zeros((ref.size + 7) // 8, np.uint8)

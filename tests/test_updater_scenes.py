@@ -37,7 +37,7 @@ def drive(ref, shapes, config=None, seconds=80.0, seed=0, each=None, offset=None
     robot pose as odometry. Returns the updater and, per cell, how many processed scans hit
     it / saw it (true geometry)."""
     mount, make_scan = LIDARS[lidar]
-    updater = MapUpdater(ref, config)
+    updater = MapUpdater(ref, config, profile="paper")
     hits = np.zeros(ref.shape, int)
     seen = np.zeros(ref.shape, int)
     for true, noisy, t in Drive(seconds=seconds, seed=seed).steps():

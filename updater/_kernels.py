@@ -1743,38 +1743,98 @@ def spread_freed(ref, decided, hist, seen, width, mask, shift, max_cells, spread
 
 
 @njit(cache=True)
-def keep_beside_standing(ref, bits, hist, seen, width, mask, shift, out):
+def keep_beside_standing(ref, bits, hist, seen, width, mask, shift, threshold, max_cells, out):
     """``out`` (a copy of ``bits``): the bits cleared of the occupied cells of ``ref`` (flat)
-    beside something that stands: an 8-neighbour occupied in ``ref`` whose bit is clear, or
-    unknown in ``ref`` and never flagged (no beam has passed through it or ended in it). What
-    is freed next to such a cell is a sliver of a face a beam grazed, or a face a pose error
-    wore, not an object that went: the cells of a removed object go together, and its
-    interior is seen through with it. Returns the count cleared."""
+    beside something that stands (``_stands_beside``). What is freed next to such a cell is a
+    sliver of a face a beam grazed, or a face a pose error wore, not an object that went: the
+    cells of a removed object go together, and its interior is seen through with it. Then, to
+    a fixed point, the cells freed on fewer than ``threshold`` flags (the unanimous rule's)
+    beside one kept so in a structure that stands (8-connected occupied cells of ``ref``, one
+    of which the scans still see, ``confirmed``, or more than ``max_cells`` of them): a face
+    worn along a run of cells stands with its ends, while a removed object that no scan hits
+    goes whole. Returns the count cleared."""
     size = ref.shape[0]
     height = size // width
+    anchored = np.zeros_like(out)       # cells kept in a structure that stands
+    checked = np.zeros_like(out)        # cells whose structure was looked at ...
+    stands = np.zeros_like(out)         # ... and found standing
+    done = np.zeros_like(out)
+    members = np.empty(max_cells + 9, np.int64)
     cleared = 0
     for b in range(bits.shape[0]):
         if bits[b] == 0:
             continue
         for idx in range(b * 8, min(b * 8 + 8, size)):
-            if not bit_get(bits, idx) or ref[idx] != OCCUPIED:
-                continue
-            row, col = idx // width, idx % width
-            standing = False
-            for rr in range(max(row - 1, 0), min(row + 2, height)):
-                for cc in range(max(col - 1, 0), min(col + 2, width)):
-                    j = rr * width + cc
-                    if j == idx:
-                        continue
-                    if ref[j] == OCCUPIED and not bit_get(bits, j):
-                        standing = True
-                    elif ref[j] == UNKNOWN and hist[j] & mask == 0 and \
-                            flag_count(hist, seen, j, shift) == 0:
-                        standing = True
-            if standing:
+            if bit_get(bits, idx) and ref[idx] == OCCUPIED and \
+                    _stands_beside(ref, bits, hist, seen, width, mask, shift, idx):
                 out[idx >> 3] &= np.uint8(~(1 << (idx & 7)) & 0xFF)
                 cleared += 1
+                if _structure_stands(ref, hist, seen, width, height, mask, shift, idx,
+                                     max_cells, checked, stands, done, members):
+                    anchored[idx >> 3] |= np.uint8(1 << (idx & 7))
+    more = cleared > 0
+    while more:
+        more = False
+        for b in range(out.shape[0]):
+            if out[b] == 0:
+                continue
+            for idx in range(b * 8, min(b * 8 + 8, size)):
+                if bit_get(out, idx) and ref[idx] == OCCUPIED and \
+                        flag_count(hist, seen, idx, shift) < threshold and \
+                        _beside_anchored(ref, anchored, width, height, idx):
+                    out[idx >> 3] &= np.uint8(~(1 << (idx & 7)) & 0xFF)
+                    anchored[idx >> 3] |= np.uint8(1 << (idx & 7))
+                    cleared += 1
+                    more = True
     return cleared
+
+
+@njit(cache=True)
+def _structure_stands(ref, hist, seen, width, height, mask, shift, idx, max_cells, checked,
+                      stands, done, members):
+    """Whether the structure of occupied cell ``idx`` stands (``keep_beside_standing``),
+    flooded once: the answer is kept for the cells visited (``checked``, ``stands``)."""
+    if bit_get(checked, idx):
+        return bit_get(stands, idx) == 1
+    n, seen_still = _flood_occupied(ref, hist, seen, width, height, mask, shift, idx,
+                                    max_cells, done, members)
+    up = seen_still or n > max_cells
+    for k in range(min(n, members.shape[0])):
+        j = members[k]
+        done[j >> 3] &= np.uint8(~(1 << (j & 7)) & 0xFF)
+        checked[j >> 3] |= np.uint8(1 << (j & 7))
+        if up:
+            stands[j >> 3] |= np.uint8(1 << (j & 7))
+    return up
+
+
+@njit(cache=True, inline="always")
+def _beside_anchored(ref, anchored, width, height, idx):
+    row, col = idx // width, idx % width
+    for rr in range(max(row - 1, 0), min(row + 2, height)):
+        for cc in range(max(col - 1, 0), min(col + 2, width)):
+            j = rr * width + cc
+            if j != idx and ref[j] == OCCUPIED and bit_get(anchored, j):
+                return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _stands_beside(ref, bits, hist, seen, width, mask, shift, idx):
+    """Whether an 8-neighbour of cell ``idx`` stands: occupied in ``ref`` with its bit clear,
+    or unknown in ``ref`` and never flagged (no beam has passed through it or ended in it)."""
+    height = ref.shape[0] // width
+    row, col = idx // width, idx % width
+    for rr in range(max(row - 1, 0), min(row + 2, height)):
+        for cc in range(max(col - 1, 0), min(col + 2, width)):
+            j = rr * width + cc
+            if j == idx:
+                continue
+            if ref[j] == OCCUPIED and not bit_get(bits, j):
+                return True
+            if ref[j] == UNKNOWN and hist[j] & mask == 0 and flag_count(hist, seen, j, shift) == 0:
+                return True
+    return False
 
 
 @njit(cache=True)

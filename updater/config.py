@@ -10,7 +10,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from gridmap.config import check_bounds, config_from_dict, config_from_yaml
+from gridmap.config import (DEFAULT_PROFILE, check_bounds, config_from_dict,
+                            config_from_profile, config_from_yaml)
 from gridmap.errors import MapUpdatingError
 
 
@@ -47,6 +48,52 @@ BOUNDS = {
 }
 
 
+# The robot profile: the keys where it differs from the paper's (the class's defaults), each
+# with why (docs/configuration.md's table is made from this; benchmarks/bench_static.py and
+# benchmarks/bench_real_changes.py measure it).
+ROBOT_PROFILE = {
+    "grow_into_unknown": (True, "a robot's map is rarely whole: the map grows into the space "
+                          "it had not seen (a hall's unknown bay: 0.85 of its surfaces drawn, "
+                          "none without)"),
+    "gate_min_interval": (0.0, "recordings of any density and live scanners: a new view is "
+                          "what counts, not the time since the last one"),
+    "gate_min_distance": (0.2, "a new view every 0.2 m (0.4 m keeps too few views of a sparse "
+                          "recording; 0.1-0.15 m frees walls on Freiburg 079)"),
+    "gate_min_rotation_deg": (20.0, "... or 20 deg of turn"),
+    "gate_velocity_max_dt": (0.5, "the angular velocity judged only over samples at most "
+                             "0.5 s apart (a recording that keeps a scan a metre turns tens of "
+                             "degrees between scans)"),
+    "gate_fast_turn_deg_s": (60.0, "a fast turn is 60 deg/s (the skew of a spinning lidar), "
+                             "not 12"),
+    "gate_recovery_time": (0.5, "a fast turn holds back 0.5 s of scans ..."),
+    "gate_recovery_distance": (0.0, "... not 1.6 m of travel"),
+    "gate_turn_cover": (True, "turning in place, a scan is processed while a direction it "
+                        "sees was seen fewer than gate_turn_views times from there"),
+    "gate_turn_views": (2, "Orebro's robot stops to look round: two views of each direction"),
+    "gate_confirm": (True, "scans held back as views already taken still confirm the "
+                     "surfaces they hit (a robot that stands and looks round: without it, 34 "
+                     "wall cells of Freiburg 079 are freed)"),
+    "gate_confirm_once": (True, "... each cell once between two views: a dozen held-back scans "
+                          "of a person standing where a removed object was kept it (the "
+                          "warehouse's W4: 8 cells)"),
+    "unanimous_min": (3, "a cell seen fewer than T times (a corridor seen in passing, a "
+                      "recording that keeps a scan a metre) changes when at least 3 flags, "
+                      "all of them, say so"),
+    "min_run_width": (0.2, "the run filter keeps a run whose ends lie 0.2 m apart: 3 beams of "
+                      "a 1 deg lidar span 0.28 m at 8 m"),
+    "spread_removed": (True, "a removed object is freed as a whole, its sides seen through "
+                       "once or twice with the rest"),
+    "support_exact_state": (True, "unknown cells seen through as the map grows lend a wall "
+                            "no support"),
+    "removed_skip_across": (True, "the removed-obstacle walk ends as far from a surface a beam "
+                            "grazes as from one it meets square: a pose a few centimetres off "
+                            "across a wall no longer walks beams through its face"),
+    "free_with_neighbours": (True, "a cell of M is freed only with what stands beside it: no "
+                             "sliver of a face grazed by beams, no wall cell worn by a pose "
+                             "error"),
+}
+
+
 @dataclass(frozen=True)
 class UpdaterConfig:
     # --- 0. Gating (from the authors' code; not in the paper) ---------------------------------
@@ -68,6 +115,9 @@ class UpdaterConfig:
     # Not in the authors' code (MapUpdater._confirm): a scan held back as a view already
     # taken (too soon, no motion, turning in place) still gives its unchanged flags.
     gate_confirm: bool = False
+    # ... each cell at most once between two processed scans: the scans held back between two
+    # views would otherwise outvote the changes the views see
+    gate_confirm_once: bool = False
     # --- Valid beams --------------------------------------------------------------------------
     max_range: float = 18.0                  # [m] beams at or beyond min(this, range_max) invalid
     # --- 1. Beam classifier -------------------------------------------------------------------
@@ -164,8 +214,8 @@ class UpdaterConfig:
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed
 
     def __post_init__(self):
-        for name in ("gating", "gate_confirm", "gate_turn_cover", "neighbour_support",
-                     "last_check", "fill_gaps",
+        for name in ("gating", "gate_confirm", "gate_confirm_once", "gate_turn_cover",
+                     "neighbour_support", "last_check", "fill_gaps",
                      "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams",
                      "spread_removed", "support_exact_state", "free_with_neighbours",
                      "removed_skip_across"):
@@ -199,6 +249,13 @@ class UpdaterConfig:
     # --- loading ------------------------------------------------------------------------------
     def to_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def profile(cls, name: str = DEFAULT_PROFILE, overrides: dict | None = None,
+                source: str | None = None) -> UpdaterConfig:
+        """The configuration of profile ``name`` (``paper``: the class's defaults; ``robot``:
+        those with ``ROBOT_PROFILE``'s keys), with ``overrides`` laid over it key by key."""
+        return config_from_profile(cls, ROBOT_PROFILE, name, overrides, UpdaterError, source)
 
     @classmethod
     def from_dict(cls, values: dict, source: str = "updater config") -> UpdaterConfig:

@@ -50,6 +50,7 @@ import numpy as np
 
 from gridmap import GridError, OccupancyGrid, Pose2D, PoseVerdict, Scan, Verdict
 from gridmap.atomic import write_atomically
+from gridmap.config import DEFAULT_PROFILE
 from gridmap.files import FileInputError, check_regular_file
 
 from . import saved_state, steps
@@ -121,17 +122,20 @@ class ScanReport:
 class MapUpdater:
     """The map updater of docs/algorithm.md on a fixed reference map.
 
+    ``config``: None for profile ``profile``'s (``robot``, what a robot should run, or
+    ``paper``, the paper and its authors' code: ``UpdaterConfig.profile``).
     ``process(scan, sensor_pose, odometry)`` once per scan; ``updated_map()`` at any time.
     ``sensor_pose`` is the lidar's pose in the map frame (the robot pose already composed with
     the lidar's mount); ``odometry`` the robot's odom-frame pose at the scan's time, used for
     gating only.
     """
 
-    def __init__(self, reference_map: OccupancyGrid, config: UpdaterConfig | None = None):
+    def __init__(self, reference_map: OccupancyGrid, config: UpdaterConfig | None = None, *,
+                 profile: str = DEFAULT_PROFILE):
         if not isinstance(reference_map, OccupancyGrid):
             raise UpdaterError(f"reference_map must be a gridmap.OccupancyGrid, got "
                                f"{type(reference_map).__name__}")
-        config = UpdaterConfig() if config is None else config
+        config = UpdaterConfig.profile(profile) if config is None else config
         if not isinstance(config, UpdaterConfig):
             raise UpdaterError(f"config must be an UpdaterConfig, got {type(config).__name__}")
         if reference_map.data.size >= 2**31:
@@ -165,6 +169,11 @@ class MapUpdater:
             max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
         self._n_changed = 0
+        # with gate_confirm_once: the view (processed scans, mod 255) each occupied cell of M
+        # was last confirmed in, so that the scans held back between two views confirm it once
+        once = config.gate_confirm and config.gate_confirm_once
+        self._confirmed = np.full(self._ref.size if once else 0, 255, np.uint8)
+        self._view = 0
         self._gate = Gate(config)
         self._counts = {"scans": 0, "processed": 0, "gated": 0, "lost": 0, "skipped": 0}
         self._ws = steps.Workspace()
@@ -216,6 +225,7 @@ class MapUpdater:
         self._n_drawn += d_drawn
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
+            self._view = (self._view + 1) % 255
         return ScanReport(t, ScanStatus.PROCESSED, "", n_valid, kept, raw, n_ch, n_new, n_un,
                           self._n_changed + self._n_drawn, ws.verdict.copy(), placed)
 
@@ -224,7 +234,9 @@ class MapUpdater:
         gate held back as a view already taken (the robot has not moved, or only turned) hits,
         and none of its other flags. A robot standing still or spinning then cannot fill a
         buffer with changes seen from one place, and its scans still confirm the surfaces it
-        sees, as the scans around them do. (Not their free walks: the pose check, asked only
+        sees, as the scans around them do (with ``gate_confirm_once``, each cell once
+        between two views: the scans held back between two views would otherwise outvote the
+        changes the views see). (Not their free walks: the pose check, asked only
         for the scans let through, does not vouch for these poses, and a walk placed a little
         off crosses the face of a new object.) Returns the count of unchanged flags (0 for a
         scan not confirmed: the option off, the sensor off the map, or the scan lost)."""
@@ -237,6 +249,8 @@ class MapUpdater:
             return 0
         n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
         n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
+        if self._confirmed.size:
+            n_un = steps.once_per_view(ws, n_un, self._confirmed, self._view, self._un_marks)
         self._push_and_decide(0, n_un)
         return n_un
 
@@ -322,7 +336,7 @@ class MapUpdater:
                                              self._ref.shape[1], self._res, self.config)
         return steps.keep_beside_standing(self._hist.reshape(-1), self._seen.reshape(-1),
                                           self._ref.reshape(-1), bits, self._ref.shape[1],
-                                          self.config)
+                                          self._res, self.config)
 
     def changed_cells(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the cells the decision rule marks changed, in row-major order.

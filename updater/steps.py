@@ -682,6 +682,23 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                             shift=count_shift(cfg))
 
 
+def once_per_view(ws: Workspace, n: int, confirmed: np.ndarray, view: int,
+                  marks: np.ndarray) -> int:
+    """The first n of ``ws.unchanged`` without the cells ``confirmed`` (flat, a view number
+    per cell) already has at ``view``, whose marks are cleared as the push would; the others
+    get ``view``. Returns the count kept."""
+    cells = ws.unchanged[:n]
+    again = confirmed[cells] == view
+    if again.any():
+        dropped = cells[again]
+        np.bitwise_and.at(marks, dropped >> 3,
+                          (~np.left_shift(1, dropped & 7)).astype(np.uint8))
+        cells = cells[~again]
+        ws.unchanged[:cells.size] = cells
+    confirmed[cells] = view
+    return int(cells.size)
+
+
 def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                     decided: np.ndarray, n_changed: int, n_unchanged: int, width: int,
                     cfg: UpdaterConfig, res: float, ch_marks: np.ndarray, un_marks: np.ndarray,
@@ -730,15 +747,20 @@ def spread_freed(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndar
 
 
 def keep_beside_standing(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
-                         bits: np.ndarray, width: int, cfg: UpdaterConfig) -> np.ndarray:
+                         bits: np.ndarray, width: int, res: float, cfg: UpdaterConfig
+                         ) -> np.ndarray:
     """``bits`` (the cells the output changes) without the occupied cells of M beside an
-    occupied cell of M the output keeps, or beside an unknown cell of M that no flag reached
+    occupied cell of M the output keeps, or beside an unknown cell of M that no flag reached,
+    and, to a fixed point, those of them freed on fewer than T flags beside one kept so in a
+    structure of M that stands (one the scans still see, or larger than ``spread_max_area``)
     (``cfg.free_with_neighbours``); ``bits`` itself when the rule is off."""
     if not cfg.free_with_neighbours:
         return bits
     out = bits.copy()
+    max_cells = int(math.floor(cfg.spread_max_area / res**2 + 1e-9))
     kernels().keep_beside_standing(ref_flat, bits, hist_flat, seen_flat, width=width,
-                                   mask=buffer_mask(cfg), shift=count_shift(cfg), out=out)
+                                   mask=buffer_mask(cfg), shift=count_shift(cfg),
+                                   threshold=cfg.threshold, max_cells=max_cells, out=out)
     return out
 
 

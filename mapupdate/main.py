@@ -20,8 +20,16 @@ from .version import __version__
 
 CONFIG_HELP = ("YAML file with the sections updater, localizer and pose_check, each optional, "
                "holding the fields of updater.UpdaterConfig, localization.LocalizerConfig and "
-               "localization.confidence.PoseCheckConfig; keys a section leaves out keep that "
-               "class's defaults. --pose-check/--no-pose-check still turn the check on or off")
+               "localization.confidence.PoseCheckConfig, laid over the profile key by key "
+               "(and an optional 'profile' key); --pose-check/--no-pose-check still turn the "
+               "check on or off")
+PROFILE_HELP = ("the defaults the configuration starts from: robot (what a robot should run, "
+                "the default) or paper (the paper and its authors' code); "
+                "docs/configuration.md lists where they differ")
+
+
+def _add_profile(p) -> None:
+    p.add_argument("--profile", default=None, metavar="NAME", help=PROFILE_HELP)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -73,9 +81,11 @@ def _add_run(sub) -> None:
     run.add_argument("--resume", type=Path, default=None, metavar="DIR",
                      help="continue the killed run in DIR after its last finished session")
     run.add_argument("--config", type=Path, default=None, metavar="FILE.yaml", help=CONFIG_HELP)
+    _add_profile(run)
     run.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map or the localiser's "
-                          "covariance calls unsure (default: on)")
+                          "covariance calls unsure (default: as the profile has it, on for "
+                          "robot)")
     run.add_argument("--method", default="paper", metavar="NAME",
                      help="what updates the map: paper (the updater, default), none (keep "
                           "M(i-1)), remap (a fresh log-odds map of the session), fuse "
@@ -105,6 +115,7 @@ def _add_run(sub) -> None:
     fleet.add_argument("--unmasked", action="store_true",
                        help="give the updater the other robots' returns too")
     fleet.add_argument("--no-progress", action="store_true", help="no progress line")
+    _add_profile(fleet)
     fleet.set_defaults(command_at=("testbed_commands", "fleet"))
 
 
@@ -136,10 +147,12 @@ def _add_update(sub) -> None:
     upd.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
                      help=CONFIG_HELP + " (updater keys go under 'updater:', also when they "
                                         "are the only ones)")
+    _add_profile(upd)
     _add_log_options(upd)
-    upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=False,
+    upd.add_argument("--pose-check", action=argparse.BooleanOptionalAction, default=None,
                      help="skip scans whose pose the scan's fit to the map (or the localiser's "
-                          "covariance) calls unsure (default: off; docs/choices.md)")
+                          "covariance) calls unsure (default: as the profile has it, on for "
+                          "robot; docs/choices.md)")
     upd.add_argument("--initial-pose", nargs=3, type=float, default=None,
                      metavar=("X", "Y", "YAW"),
                      help="where the localiser starts, in the map frame [m, m, rad] (default: "

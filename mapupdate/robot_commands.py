@@ -18,7 +18,7 @@ from mapstore.png import write_diff_png
 from robot import logmap, replay
 from robot.outputs import check_outputs, map_files, map_inputs
 from robot.replay import LogSource, Outputs, Placement
-from robot.robot_config import ROBOT_UPDATER_DEFAULTS, load_robot_config, section_config
+from robot.robot_config import load_robot_config
 from robot.ros1.node import run_node
 from robotlogs import LogLimits, log_observations
 
@@ -48,7 +48,7 @@ def _update(args, map_path, out, trajectory):
     """Run the update of ``map_path`` from the log into ``out``; (summary, configuration)."""
     # the method and --state, then the configuration, are refused before anything is read
     replay.check_update_arguments(args.poses, args.smooth_poses, args.method, args.state)
-    config = load_robot_config(args.config)
+    config = load_robot_config(args.config, profile=args.profile)
     check_outputs({"--map": map_inputs(map_path), "--log": [args.log],
                    "--config": [args.config] if args.config else [],
                    "--state": [args.state] if args.state and args.state.exists() else [],
@@ -62,12 +62,16 @@ def _update(args, map_path, out, trajectory):
                     pose_topic=args.pose_topic, limits=log_limits(args))
     placement = Placement(source=args.poses, initial_pose=start,
                           smooth_window=args.smooth_poses, pose_check=args.pose_check,
-                          localizer_config=config.localizer, pose_check_config=config.pose_check)
+                          profile=config.profile, localizer_config=config.localizer,
+                          pose_check_config=config.pose_check)
     outputs = Outputs(out, state=args.state, trajectory=trajectory)
+    # with a saved state and no configuration asked for, the state's own
+    asked = args.config is not None or args.profile is not None
     summary = replay.update_from_log(map_path, log, outputs, placement, method=args.method,
-                                     updater_config=config.updater,
+                                     updater_config=config.updater if asked else None,
                                      progress=not args.no_progress)
     summary.setdefault("out", str(out))
+    summary["profile"], summary["differences"] = config.profile, config.differences()
     return summary, config
 
 
@@ -138,7 +142,6 @@ def _first_version(store, map_arg) -> int:
 def _session_meta(args, summary: dict, config, trajectory: Path, parent: int) -> dict:
     """What made the version: robot, log, time span, scans, method and configuration."""
     times = _tum_times(trajectory)
-    updater = config.updater or section_config("updater", ROBOT_UPDATER_DEFAULTS, "defaults")
     keys = ("scans", "scans_used", "scans_processed", "scans_refused_by_pose_check",
             "scans_dropped_as_lost", "scans_gated", "scans_off_map", "scans_not_tracking",
             "scans_without_pose")
@@ -147,8 +150,11 @@ def _session_meta(args, summary: dict, config, trajectory: Path, parent: int) ->
             "time_span": [times[0], times[-1]] if times else None,
             "scans": {k: int(summary.get(k) or 0) for k in keys},
             "method": args.method, "pose_source": summary.get("pose_source"),
-            "pose_check": bool(args.pose_check),
-            "config": {**config.to_dict(), "updater": updater.to_dict()},
+            "pose_check": config.use_pose_check if args.pose_check is None else args.pose_check,
+            "profile": config.profile,
+            "config": {"profile": config.profile, "updater": config.updater.to_dict(),
+                       "localizer": config.localizer.to_dict(),
+                       "pose_check": config.pose_check.to_dict()},
             "started_from": parent, "project_version": __version__}
 
 

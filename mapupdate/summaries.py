@@ -14,14 +14,20 @@ def update_lines(s: dict) -> list[str]:
     threshold, how the localiser fared, warnings. When no cell changed, a line says why."""
     g = s.get
     changed = sum(g(k, 0) for k in CHANGE_KEYS)
-    used = f"method {g('method', 'paper')}, poses {g('pose_source')}"
+    used = f"method {g('method', 'paper')}, poses {g('pose_source')}" + (
+        f", profile {g('profile')}" if g("profile") else "")
     out = [f"wrote {g('out')}: {_changes_text(s) if changed else '0 cells changed'}; {used}"]
+    if g("differences"):
+        out.append(f"  configuration over the {g('profile')} profile: "
+                   + "; ".join(g("differences")))
     skipped = sum((g("read") or {}).get("skipped", {}).values())
     out.append(f"  {g('scans', 0)} scans read" + (f" ({skipped} lines or messages of the log "
                                                    "skipped, below)" if skipped else "")
                + f", {g('scans_used', g('scans', 0))} used; {g('scans_processed', 0)} "
                f"processed past the gate, {g('scans_dropped_as_lost', 0)} dropped as lost, "
                f"{g('scans_refused_by_pose_check', 0)} refused by the pose check"
+               + (f", {g('scans_corrected_by_pose_check')} placed by it at a pose that fits "
+                  f"better" if g("scans_corrected_by_pose_check") else "")
                + (f", {g('scans_off_map')} off the map" if g("scans_off_map") else ""))
     out += [f"  {line}" for line in g("read_lines") or []]
     if not changed:

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import sim
+from gridmap.config import DEFAULT_PROFILE
 from mapstore import open_store
 from robot.methods import check_method
 from robot.outputs import OutputClash, check_outputs
@@ -37,7 +38,8 @@ def render(args) -> int:
 
 def run(args) -> int:
     require("pymunk", "matplotlib", *(["rerun"] if args.rerun or args.rerun_spawn else []))
-    config = load_robot_config(args.config)     # refused before anything is written
+    # refused before anything is written
+    config = load_robot_config(args.config, profile=args.profile)
     check_method(args.method, "--method")
     if args.resume is not None and args.out is not None and args.out != args.resume:
         raise ResumeError(f"--resume {args.resume} and --out {args.out} name different folders")
@@ -51,10 +53,15 @@ def run(args) -> int:
     if args.store is not None:
         observers.append(StoreRecorder(args.store, args.method, args.seed))
     given = {} if args.pose_check is None else {"pose_check": args.pose_check}
+    # only what was asked for: a resumed run keeps its own (scenarios.checkpoint)
+    keys = config.given
+    asked = args.profile is not None or args.config is not None
     opts = RunOptions(out=args.resume or args.out, seed=args.seed, sessions=args.sessions,
                       quick=args.quick, progress=not args.no_progress,
-                      updater_config=config.updater, localizer_config=config.localizer,
-                      pose_check_config=config.pose_check,
+                      profile=config.profile if asked else None,
+                      updater_config=config.updater if "updater" in keys else None,
+                      localizer_config=keys.get("localizer"),
+                      pose_check_config=config.pose_check if "pose_check" in keys else None,
                       observer=Observers(*observers) if observers else None,
                       resume=args.resume is not None, method=args.method, **given)
     try:
@@ -141,7 +148,8 @@ def fleet(args) -> int:
 
     options = FleetOptions(robots=args.robots, mode=args.mode, merge_rule=args.merge,
                            quick=args.quick, sessions=args.sessions, seed=args.seed,
-                           mask_robots=not args.unmasked, progress=not args.no_progress)
+                           mask_robots=not args.unmasked, progress=not args.no_progress,
+                           profile=args.profile or DEFAULT_PROFILE)
     try:
         record = run_fleet(args.scenario, options, args.out)
     except ValueError as e:             # the fleet's own checks name the option

@@ -50,7 +50,6 @@ def short_scenario(scenario, metres: float = ROUTE_METRES):
 def warm(metres: float = ROUTE_METRES) -> float:
     """Play the short run (see the module's docstring); returns its wall time [s]."""
     import sim
-    from robot.robot_config import load_robot_config
     from scenarios.catalog import find_scenario
     from scenarios.report import write_session_maps, write_session_outputs
     from scenarios.runner import RunOptions, build_initial_map, run_update_session
@@ -58,10 +57,7 @@ def warm(metres: float = ROUTE_METRES) -> float:
 
     t0 = time.perf_counter()
     scn = short_scenario(sim.load_scenario(find_scenario(None)), metres)
-    config = load_robot_config(None)
-    options = RunOptions(progress=False, updater_config=config.updater,
-                         localizer_config=config.localizer,
-                         pose_check_config=config.pose_check)
+    options = RunOptions(progress=False)            # the robot profile, as `mapupdate run`
     seeds = session_seeds(scn.seed, len(scn.sessions))
     with tempfile.TemporaryDirectory(prefix="mapupdate-warm-") as tmp:
         out = Path(tmp)
@@ -76,20 +72,19 @@ def warm(metres: float = ROUTE_METRES) -> float:
 
 def rare_paths() -> None:
     """Kernels a short run need not reach but a long one can: the estimate of a particle cloud
-    split in two clusters, with the localiser's argument types; and the updater with
-    ``mapupdate update``'s and the nodes' rules, which ``run`` leaves off (the growth into
-    the unknown, the unanimous rule, the spread of freed objects)."""
+    split in two clusters, with the localiser's argument types; and the updater of the paper
+    profile, whose rules leave kernels of the robot's unused (and the other way round)."""
     import numpy as np
 
     from localization.estimate import estimate
     from localization.resample import KldParameters
     from robot.methods import make_method
     from robot.pipeline import RobotPipeline, warm_up
-    from robot.robot_config import ROBOT_UPDATER_DEFAULTS, section_config
+    from robot.robot_config import CLASSES
 
     poses = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 1.0]])
     estimate(poses, np.full(2, 0.5), KldParameters(1, 2, 0.05, 0.99, np.array([0.5, 0.5, 0.2])))
-    config = section_config("updater", ROBOT_UPDATER_DEFAULTS, "defaults")
+    config = CLASSES["updater"].profile("paper")
     warm_up(lambda grid: RobotPipeline(make_method("paper", grid, config)))
 
 

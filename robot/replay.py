@@ -45,8 +45,9 @@ import numpy as np
 from tqdm import tqdm
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, load_map, save_map
+from gridmap.config import DEFAULT_PROFILE
 from localization import LocalizerConfig, MonteCarloLocalizer
-from localization.confidence import PoseCheck
+from localization.confidence import PoseCheck, PoseCheckConfig
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
 from localization.tracking import TrackingMonitor
 from robotlogs import LogError, LogLimits, Observation, log_observations
@@ -55,7 +56,7 @@ from updater import MapUpdater, ScanStatus, UpdaterConfig
 
 from .methods import ROBOT_METHODS, check_method, make_method
 from .pipeline import RobotPipeline, Step
-from .robot_config import ROBOT_UPDATER_DEFAULTS
+from .robot_config import POSE_CHECK_ON
 
 POSE_SOURCES = ("auto", "recorded", "localizer", "truth")
 # The summary's counts of changed cells (``_changes``), each cell in one of them.
@@ -64,12 +65,6 @@ CHANGE_KEYS = ("occupied_to_free", "free_to_occupied", "unknown_to_free", "unkno
 # Where the robot starts when the localiser has only a rough idea: std of x, y [m], yaw [rad].
 INITIAL_STD = (0.25, 0.25, 0.1)
 NO_MOUNT = Pose2D(0.0, 0.0, 0.0)
-# The localiser's configuration when none is given: nav2's, but a filter update every 0.1 m
-# rather than 0.25 m. A scan placed between updates carries the odometry since the last one,
-# and a recording's odometry can lag its scans (on the SENA log by up to 0.2 m at 4 Hz: 0.30 m
-# of error at one scan with updates every 0.25 m, 0.17 m with every 0.1 m); a log replays
-# far faster than it was recorded, so the extra updates cost little.
-LOCALIZER_DEFAULTS = {"update_min_d": 0.1}
 
 
 class ScanClock:
@@ -192,15 +187,16 @@ class Placement:
     smoothed with it over that window (``localization.smoothing.PoseSmoother``; 0: as
     recorded). ``pose_check``: scans whose pose the scan's own fit to the reference map (and,
     with the localiser, its covariance) calls unsure change nothing
-    (``localization.confidence.PoseCheck``). The configurations: None for the classes'
-    defaults."""
+    (``localization.confidence.PoseCheck``; None: as ``profile`` has it). The configurations:
+    None for the profile's (``robot.robot_config``)."""
 
     source: str = "auto"
     initial_pose: Pose2D | None = None
     initial_std: tuple[float, float, float] = INITIAL_STD
     seed: int = 0
     smooth_window: float = SMOOTH_WINDOW
-    pose_check: bool = False
+    pose_check: bool | None = None
+    profile: str = DEFAULT_PROFILE
     localizer_config: object | None = None       # localization.LocalizerConfig
     pose_check_config: object | None = None      # localization.confidence.PoseCheckConfig
     tracking_config: object | None = None        # localization.tracking.TrackingConfig
@@ -224,8 +220,8 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
                     updater_config=None, progress: bool = False) -> dict:
     """Update the map at ``map_path`` with the scans of ``log``; write ``outputs``, each
     atomically. ``method``: what updates the map, one of ``methods.ROBOT_METHODS`` (a state
-    only with ``"paper"``); no ``updater_config``: the robot's defaults
-    (``robot_config.ROBOT_UPDATER_DEFAULTS``). ``progress``: a progress bar on stderr.
+    only with ``"paper"``); no ``updater_config``: ``placement.profile``'s. ``progress``: a
+    progress bar on stderr.
     Returns what happened as a dict (``mapupdate.summaries.update_lines`` says it in words)."""
     wall0 = _time.perf_counter()
     place, state_path = placement, outputs.state
@@ -277,8 +273,14 @@ def replay_observations(grid: OccupancyGrid, found, placement: Placement = Place
     saved."""
     source = _choose_source(placement.source, found.has, log_path,
                             placement.initial_pose is not None)
-    updater, state_loaded = _updater(grid, updater_config, state_path, method)
-    pipeline = _pipeline(updater, placement.pose_check, placement.pose_check_config,
+    updater, state_loaded = _updater(grid, updater_config, state_path, method,
+                                     placement.profile)
+    check = POSE_CHECK_ON[placement.profile][0] if placement.pose_check is None \
+        else placement.pose_check
+    # scans placed by the project's localiser are refined by the check, a log's poses only
+    # as the profile says (PoseCheckConfig.refine_given)
+    pipeline = _pipeline(updater, check,
+                         _pose_check_config(placement).for_poses(source == "localizer"),
                          _smoother(placement.smooth_window, source, found.has))
     starter = None
     if source == "localizer":
@@ -330,6 +332,11 @@ def _smoothing_summary(smoother: PoseSmoother | None) -> dict:
         return {"window_s": 0.0, "scans_smoothed": 0, "restarts": 0}
     return {"window_s": smoother.window, "scans_smoothed": smoother.smoothed,
             "restarts": smoother.restarts}
+
+
+def _pose_check_config(placement: Placement) -> PoseCheckConfig:
+    given = placement.pose_check_config
+    return PoseCheckConfig.profile(placement.profile) if given is None else given
 
 
 def _pipeline(updater, pose_check: bool, pose_check_config, smoother=None) -> RobotPipeline:
@@ -454,7 +461,7 @@ class LocalizerStart:
     def __init__(self, grid, placement: Placement, map_frame: bool):
         config, initial_pose = placement.localizer_config, placement.initial_pose
         if config is None:
-            config = LocalizerConfig(**LOCALIZER_DEFAULTS)
+            config = LocalizerConfig.profile(placement.profile)
         elif isinstance(config, dict):
             config = LocalizerConfig.from_dict(config)
         elif isinstance(config, (str, Path)):
@@ -465,7 +472,7 @@ class LocalizerStart:
         self.initial_pose, self.initial_std = initial_pose, placement.initial_std
         self.map_frame = map_frame
         self.tracking_config = placement.tracking_config
-        self.pose_check_config = placement.pose_check_config
+        self.pose_check_config = _pose_check_config(placement)
         self.how = ""
 
     def start(self, obs: Observation):
@@ -530,10 +537,10 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
                            "it a path of its own")
 
 
-def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper"
-             ) -> tuple[object, bool]:
-    """A fresh ``method`` on ``grid`` (with ``config``, else with the robot's defaults,
-    ``robot_config.ROBOT_UPDATER_DEFAULTS``; the baselines use its gate), or the paper's
+def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper",
+             profile: str = DEFAULT_PROFILE) -> tuple[object, bool]:
+    """A fresh ``method`` on ``grid`` (with ``config``, else with ``profile``'s; the baselines
+    use its gate), or the paper's
     updater saved in ``state_path`` when that exists. A state holds its reference map whole,
     which is its fingerprint: it is refused for any other map, and a configuration given with
     it must be the one it was made with (its buffers follow that configuration)."""
@@ -542,7 +549,7 @@ def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper"
     elif isinstance(config, (str, Path)):
         config = UpdaterConfig.from_yaml(config)
     if state_path is None or not Path(state_path).exists():
-        config = config or UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+        config = config or UpdaterConfig.profile(profile)
         return make_method(method, grid, config), False
     upd = MapUpdater.load(state_path)
     ref = upd.reference_map

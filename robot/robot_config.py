@@ -1,5 +1,7 @@
-"""The robot software's configuration in one file: the updater, the localiser and the pose check.
+"""The robot software's configuration in one file: a profile, and the updater's, the localiser's
+and the pose check's keys laid over it.
 
+    profile: robot           # or paper; optional (the command's --profile wins)
     updater:                 # keys of updater.UpdaterConfig
       threshold: 8
     localizer:               # keys of localization.LocalizerConfig
@@ -7,64 +9,47 @@
     pose_check:              # keys of localization.confidence.PoseCheckConfig
       slack_cells: 1
 
-``mapupdate run --config FILE`` and ``mapupdate update --config FILE`` read it, the gymnasium
-environment takes the same as a dict (``config=``) and a run's checkpoint reads its recorded
-configurations back through it. Every section is optional; a section left out (or empty) leaves
-its component as the caller would have it without a file. A section given is the whole
-configuration of its component: the keys left out take that dataclass's defaults (for the
-localiser nav2's, alpha1..alpha4 = 0.2, not the robot's odometry noise that ``mapupdate run``
-gives it without a ``localizer`` section). Unknown sections and keys are refused with the
-nearest valid name before anything runs.
+Two profiles, each defined once, in its component's module (``ROBOT_PROFILE`` in
+``updater.config``, ``localization.config`` and ``localization.confidence``, and
+``POSE_CHECK_ON`` here): ``paper``, the paper and its authors' code (the classes' own
+defaults), and ``robot``, what a robot should run, the default of every entry point. A file,
+a ROS parameter or a mapping lays its keys over the profile key by key: a section given
+replaces no key it does not name. ``mapupdate run --config FILE``, ``mapupdate update
+--config FILE`` and the nodes read a file, the gymnasium environment and sweep specs take the
+same as a mapping (``config=``), and a run's checkpoint reads its recorded configurations
+back through it. Unknown sections and keys are refused with the nearest valid name before
+anything runs. docs/configuration.md lists every key where the profiles differ, and why.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from functools import cached_property
 from pathlib import Path
 
 from gridmap import MapUpdatingError
-from gridmap.config import check_keys
+from gridmap.config import DEFAULT_PROFILE, check_keys, check_profile
 from gridmap.files import FileInputError, load_yaml
 from gridmap.suggest import did_you_mean
 from localization import LocalizerConfig
 from localization.confidence import PoseCheckConfig
 from updater import UpdaterConfig
 
-# What ``mapupdate update`` and the ROS node give the updater without an ``updater`` section:
-# the class's defaults, and
-# - the growth into the unknown, since a real robot's map is rarely whole (a synthetic hall
-#   with an unknown bay: 0.85 of the bay's surfaces drawn, none without;
-#   tests/test_logs_partly_mapped.py);
-# - a gate for recordings of any density and live scanners (docs/real_changes.md): a new view
-#   every 0.1 m or 10 deg, the angular velocity judged only over samples at most 0.5 s apart
-#   (a recording that keeps a scan a metre turns tens of degrees between scans), a fast turn
-#   at 60 deg/s (the skewed scans of a spinning lidar) holding back 0.5 s of scans rather than
-#   1.6 m of travel, turning in place processed while a direction it sees was seen fewer than
-#   twice from there (gate_turn_views 2), and the scans held back still confirming the
-#   surfaces they hit (gate_confirm);
-# - the unanimous rule for cells observed fewer than T times (unanimous_min 3): corridors seen
-#   in passing, recordings that keep a scan a metre;
-# - the run filter by width as well as by beams (min_run_width 0.2 m): a lidar of 1 deg steps
-#   needs 0.28 m of face at 8 m for 3 beams, so far objects were dropped as thin ones;
-# - a removed object freed as a whole (spread_removed): the sides of a box that a sparse
-#   recording sees through once or twice go with the rest of it;
-# - the neighbour support by the map's value (support_exact_state): unknown cells seen
-#   through as the map grows do not support freeing the wall behind them.
-# ``mapupdate run`` keeps the class's defaults (the paper's and its authors' code): its
-# figures are the paper's method's.
-ROBOT_UPDATER_DEFAULTS = {
-    "grow_into_unknown": True,
-    "gate_min_interval": 0.0, "gate_min_distance": 0.2, "gate_min_rotation_deg": 20.0,
-    "gate_velocity_max_dt": 0.5, "gate_fast_turn_deg_s": 60.0, "gate_recovery_time": 0.5,
-    "gate_recovery_distance": 0.0, "gate_turn_cover": True, "gate_turn_views": 2,
-    "gate_confirm": True,
-    "unanimous_min": 3, "min_run_width": 0.2, "spread_removed": True,
-    "support_exact_state": True,
+# Whether the pose check runs (``localization.confidence.PoseCheck``: scans whose pose the
+# scan's own fit to the map, or the localiser's covariance, calls unsure change nothing), per
+# profile, and why. The command line's --pose-check/--no-pose-check and the nodes'
+# use_pose_check parameter say otherwise.
+POSE_CHECK_ON = {
+    "paper": (False, "the paper has no pose check"),
+    "robot": (True, "a pose that is off frees what stands; the check refuses the scans whose "
+              "pose a nearby one explains clearly better, and places a scan a few "
+              "centimetres off at the pose nearby that fits it"),
 }
 
 # The sections of the file and the configuration each holds.
 CLASSES = {"updater": UpdaterConfig, "localizer": LocalizerConfig, "pose_check": PoseCheckConfig}
 SECTIONS = tuple(CLASSES)
+TOP_KEYS = ("profile", *SECTIONS)
 
 
 class ConfigError(MapUpdatingError, ValueError):
@@ -72,48 +57,103 @@ class ConfigError(MapUpdatingError, ValueError):
     section and the key."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=True)
 class RobotConfig:
-    """One configuration per component; None where none was given (the caller's default)."""
+    """A profile and the keys given over it (``given``: section -> {key: value}). The
+    components' configurations are the profile's with those keys (``updater``, ``localizer``,
+    ``pose_check``)."""
 
-    updater: UpdaterConfig | None = None
-    localizer: LocalizerConfig | None = None
-    pose_check: PoseCheckConfig | None = None
+    profile: str = DEFAULT_PROFILE
+    given: dict = field(default_factory=dict)
+
+    @cached_property
+    def updater(self) -> UpdaterConfig:
+        return UpdaterConfig.profile(self.profile, self.given.get("updater"))
+
+    @cached_property
+    def localizer(self) -> LocalizerConfig:
+        return LocalizerConfig.profile(self.profile, self.given.get("localizer"))
+
+    @cached_property
+    def pose_check(self) -> PoseCheckConfig:
+        return PoseCheckConfig.profile(self.profile, self.given.get("pose_check"))
+
+    @property
+    def use_pose_check(self) -> bool:
+        """Whether the profile runs the pose check."""
+        return POSE_CHECK_ON[self.profile][0]
+
+    def localizer_over(self, base: dict) -> LocalizerConfig:
+        """The localiser's configuration with ``base`` (e.g. the alphas of a simulated robot's
+        known odometry noise) laid over the profile, and the keys given over that."""
+        return LocalizerConfig.profile(self.profile, {**base, **self.given.get("localizer", {})})
 
     def to_dict(self) -> dict:
-        """The sections given, as ``load_robot_config`` takes them."""
-        return {name: getattr(self, name).to_dict() for name in SECTIONS
-                if getattr(self, name) is not None}
+        """The profile and the keys given, as ``load_robot_config`` takes them."""
+        return {"profile": self.profile, **{k: dict(v) for k, v in self.given.items()}}
+
+    def differences(self) -> list[str]:
+        """Every key whose value differs from the profile's, as ``section.key: value (profile
+        P: default)``; empty when the configuration is the profile's."""
+        return differences(self.profile, self.updater, self.localizer, self.pose_check)
 
 
-def load_robot_config(given, source: str | None = None) -> RobotConfig:
-    """A ``RobotConfig`` from a YAML file's path, a mapping of sections, a ``RobotConfig`` (as
-    it is) or None (nothing given). ``source`` names the origin in errors (default: the path,
-    or "config"). Raises ``ConfigError`` for an unreadable file, an unknown section or key, and
-    the component's own error (a ``MapUpdatingError``) for a bad value."""
-    if given is None or isinstance(given, RobotConfig):
-        return given or RobotConfig()
+def differences(profile: str, updater=None, localizer=None, pose_check=None) -> list[str]:
+    """The keys of the configurations given (None: not compared) whose values differ from
+    profile ``profile``'s, one line each."""
+    out = []
+    for name, config in (("updater", updater), ("localizer", localizer),
+                         ("pose_check", pose_check)):
+        if config is None:
+            continue
+        default = CLASSES[name].profile(profile).to_dict()
+        for key, value in config.to_dict().items():
+            if value != default[key]:
+                out.append(f"{name}.{key}: {value!r} (profile {profile}: {default[key]!r})")
+    return out
+
+
+def load_robot_config(given, source: str | None = None, profile: str | None = None
+                      ) -> RobotConfig:
+    """A ``RobotConfig`` from a YAML file's path, a mapping of sections, a ``RobotConfig`` or
+    None (nothing given). ``profile``: the profile to lay the keys over (None: the file's
+    ``profile`` key, else ``robot``); given, it wins over the file's. ``source`` names the
+    origin in errors (default: the path, or "config"). Raises ``ConfigError`` for an
+    unreadable file, an unknown profile, section or key, and the component's own error (a
+    ``MapUpdatingError``) for a bad value."""
+    if profile is not None:
+        check_profile(profile, ConfigError, "--profile")
+    if isinstance(given, RobotConfig):
+        given = given.to_dict()
     if isinstance(given, (str, Path)):
         source = source or str(given)
         given = _read_yaml(Path(given))
     source = source or "config"
     if given is None:
-        return RobotConfig()      # an empty file
+        given = {}            # nothing given, or an empty file
     if not isinstance(given, dict):
         raise ConfigError(f"{source}: expected a mapping of sections ({', '.join(SECTIONS)}), "
                           f"got {type(given).__name__}")
     for name in given:
-        if name not in SECTIONS:
+        if name not in TOP_KEYS:
             raise ConfigError(f"{source}: unknown section '{name}'{_section_hint(name)}")
+    name = profile or given.get("profile") or DEFAULT_PROFILE
+    check_profile(name, ConfigError, f"{source}: profile")
     # an empty section (YAML "updater:" with nothing under it) is no section
-    return RobotConfig(**{name: section_config(name, given[name], source)
-                          for name in SECTIONS if given.get(name) not in (None, {})})
+    sections = {}
+    for section in SECTIONS:
+        values = given.get(section)
+        if values in (None, {}):
+            continue
+        section_config(section, values, source, profile=name)      # checked now, once
+        sections[section] = dict(values)
+    return RobotConfig(name, sections)
 
 
 def _section_hint(name) -> str:
     """The nearest section; or, for a key of a section at the top level (a file of updater keys
     alone, as ``mapupdate update --config`` once read), the section it belongs under."""
-    near = did_you_mean(name, SECTIONS)
+    near = did_you_mean(name, TOP_KEYS)
     if near:
         return near
     for section, cls in CLASSES.items():
@@ -122,16 +162,46 @@ def _section_hint(name) -> str:
     return f" (sections: {', '.join(SECTIONS)})"
 
 
-def section_config(name: str, values, source: str, where: str | None = None):
-    """The configuration of section ``name`` (one of ``SECTIONS``) from its mapping of keys;
-    ``where`` says in errors where the mapping is (default: "section '<name>'")."""
+def section_config(name: str, values, source: str, where: str | None = None,
+                   profile: str = DEFAULT_PROFILE):
+    """The configuration of section ``name`` (one of ``SECTIONS``): profile ``profile``'s
+    with the keys of ``values`` laid over it; ``where`` says in errors where the mapping is
+    (default: "section '<name>'")."""
     cls = CLASSES[name]
     where = where or f"section '{name}'"
     if not isinstance(values, dict):
         raise ConfigError(f"{source}: {where} must be a mapping of keys, got "
                           f"{type(values).__name__}")
     check_keys(values, [f.name for f in fields(cls)], ConfigError, source, where)
-    return cls.from_dict(values, source=f"{source}, {where}")
+    return cls.profile(profile, values, source=f"{source}, {where}")
+
+
+def profile_table() -> list[tuple[str, str, str, str, str]]:
+    """(component, key, paper, robot, why) for every key where the profiles differ: the table
+    of docs/configuration.md."""
+    from localization import config as localizer_module
+    from localization import confidence
+    from updater import config as updater_module
+
+    rows = [("pipeline", "pose check", str(POSE_CHECK_ON["paper"][0]).lower(),
+             str(POSE_CHECK_ON["robot"][0]).lower(), POSE_CHECK_ON["robot"][1])]
+    for name, module in (("updater", updater_module), ("localizer", localizer_module),
+                         ("pose_check", confidence)):
+        paper = CLASSES[name]().to_dict()
+        for key, (value, why) in module.ROBOT_PROFILE.items():
+            rows.append((name, key, _show(paper[key]), _show(value), why))
+    return rows
+
+
+def _show(value) -> str:
+    return str(value).lower() if isinstance(value, bool) else f"{value:g}" \
+        if isinstance(value, float) else str(value)
+
+
+def profile_table_markdown() -> str:
+    lines = ["| component | key | paper | robot | why |", "|---|---|---|---|---|"]
+    lines += [f"| {c} | `{k}` | {p} | {r} | {w} |" for c, k, p, r, w in profile_table()]
+    return "\n".join(lines) + "\n"
 
 
 def _read_yaml(path: Path):
@@ -141,3 +211,7 @@ def _read_yaml(path: Path):
         raise ConfigError(f"{path}: configuration file not found") from None
     except FileInputError as e:
         raise ConfigError(str(e)) from None
+
+
+if __name__ == "__main__":      # python -m robot.robot_config: the table of the profiles
+    print(profile_table_markdown(), end="")

@@ -150,6 +150,7 @@ def write_manifest(out_dir, scenario_path: Path, seed: int, options) -> None:
         "sessions": options.sessions,
         "quick": bool(options.quick),
         "pose_check": bool(options.pose_check),
+        "profile": options.profile,
         "method": options.method,
         "updater_config": _config_dict(options.updater_config),
         "localizer_config": _config_dict(options.localizer_config),
@@ -180,8 +181,9 @@ def resume_options(scenario, options):
         raise ResumeError(f"{path}: the scenario file {scenario_file} changed or vanished since "
                           "the run started; start a new run")
     default = RunOptions()
+    # runs recorded before methods: paper; before profiles: the classes' defaults, paper's
     recorded = {"seed": m["seed"], "quick": m["quick"], "pose_check": m["pose_check"],
-                "method": m.get("method", "paper")}     # runs recorded before methods: paper
+                "method": m.get("method", "paper"), "profile": m.get("profile", "paper")}
     for key, value in recorded.items():
         given = getattr(options, key)
         if given is not None and given != getattr(default, key) and given != value:
@@ -189,8 +191,13 @@ def resume_options(scenario, options):
     rebuilt = {}
     for key, section in CONFIG_KEYS.items():
         given = getattr(options, key)
-        if given is not None and _config_dict(given) != m[key]:
+        # keys given over the profile (a --config file's section): each as the run has it
+        differs = any((m[key] or {}).get(k, object()) != v for k, v in given.items()) \
+            if isinstance(given, dict) else _config_dict(given) != m[key]
+        if given is not None and differs:
             raise ResumeError(f"{path}: {key} differs from the one the run started with")
+        if isinstance(given, dict):
+            given = None
         rebuilt[key] = given if given is not None or m[key] is None else \
             _recorded_config(section, m[key], path, key)
     sessions = m["sessions"] if options.sessions is None else options.sessions

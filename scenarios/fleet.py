@@ -31,10 +31,12 @@ from tqdm import tqdm
 import evaluation as ev
 import sim
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
+from gridmap.config import DEFAULT_PROFILE, check_profile
 from gridmap.map_io import save_map
-from localization import MonteCarloLocalizer
-from localization.confidence import PoseCheck
+from localization import LocalizerConfig, MonteCarloLocalizer
+from localization.confidence import PoseCheck, PoseCheckConfig
 from robot.pipeline import RobotPipeline
+from robot.robot_config import POSE_CHECK_ON
 from sim.fleet import FleetMember, FleetWorld
 from updater import MapUpdater, UpdaterConfig
 
@@ -108,12 +110,19 @@ class FleetRobot:
     merge), and its trajectory."""
 
     def __init__(self, scenario, reference: OccupancyGrid, start: Pose2D, seed, updater,
-                 count_views: bool, board: FleetBoard | None = None, index: int = 0):
-        self.localizer = MonteCarloLocalizer(reference, localizer_config_for(scenario), seed=seed)
+                 count_views: bool, board: FleetBoard | None = None, index: int = 0,
+                 profile: str = DEFAULT_PROFILE):
+        alphas = localizer_config_for(scenario)
+        config = LocalizerConfig.profile(profile, {k: getattr(alphas, k) for k in (
+            "alpha1", "alpha2", "alpha3", "alpha4")})
+        self.localizer = MonteCarloLocalizer(reference, config, seed=seed)
         self.localizer.initialize(start, np.diag(np.square(START_STD)))
         self.board, self.index = board, index
         self.updater = updater if board is None else RobotMask(updater, index, board)
-        self.pipeline = RobotPipeline(self.updater, self.localizer, PoseCheck(reference))
+        # the check of the profile, as the runner's sessions have it
+        check = PoseCheck(reference, PoseCheckConfig.profile(profile).for_poses(
+            own_localizer=True)) if POSE_CHECK_ON[profile][0] else None
+        self.pipeline = RobotPipeline(self.updater, self.localizer, check)
         self.views = ev.ObservationCounter(reference) if count_views else None
         self.true: list = []
         self.estimated: list = []
@@ -148,7 +157,8 @@ class FleetOptions:
     quick: bool = False
     sessions: int | None = None         # W1 and this many minus one update sessions
     seed: int | None = None
-    updater_config: UpdaterConfig | None = None
+    updater_config: UpdaterConfig | None = None     # None: the profile's
+    profile: str = DEFAULT_PROFILE      # the defaults of the robots' software
     progress: bool = True
     probe_interval: float = PROBE_INTERVAL
     uplink_interval: float = UPLINK_INTERVAL
@@ -161,6 +171,7 @@ class FleetOptions:
         if self.mode not in MODES:
             raise ValueError(f"unknown mode {self.mode!r} (modes: {', '.join(MODES)})")
         check_merge_rule(self.merge_rule)
+        check_profile(self.profile, ValueError, "--profile")
 
 
 class FleetSession:
@@ -174,7 +185,7 @@ class FleetSession:
         self.name = scenario.sessions[session].name
         self.reference, self.truth = reference, world.ground_truth()
         self.mounts = [ld.mount for ld in scenario.robot.lidars]
-        cfg = options.updater_config or UpdaterConfig()
+        cfg = options.updater_config or UpdaterConfig.profile(options.profile)
         self.threshold = cfg.threshold
         self.shared = shared_updater(reference, cfg) if options.mode == "shared" else None
         self.board = FleetBoard(len(world.members), scenario.robot.radius) \
@@ -187,7 +198,8 @@ class FleetSession:
             self.robots.append(FleetRobot(scenario, reference, member.start, seed, upd,
                                           count_views=self.shared is None
                                           and options.merge_rule == "vote",
-                                          board=self.board, index=k))
+                                          board=self.board, index=k,
+                                          profile=options.profile))
         self.queue = ScanQueue(len(self.robots))
         self._outbox = [[] for _ in self.robots]
         n = len(self.robots)

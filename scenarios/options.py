@@ -26,14 +26,22 @@ class RunOptions:
     sessions: int | None = None
     quick: bool = False
     progress: bool = True
-    updater_config: object | None = None      # an updater.UpdaterConfig; None: its defaults
-    # a localization.LocalizerConfig; None: session.localizer_config_for(scenario)
+    # The defaults of every configuration left None: "robot" or "paper" (robot.robot_config);
+    # None: robot, or, resuming, the run's own.
+    profile: str | None = None
+    updater_config: object | None = None      # an updater.UpdaterConfig; None: the profile's
+    # a localization.LocalizerConfig, or a mapping of its keys laid over the profile's with
+    # the scenario's odometry noise as alphas (session.localizer_config_for); None: no keys
     localizer_config: object | None = None
     observer: SessionObserver | None = None   # told of every update session's scans
     # The safeguard against mislocalisation (localization.confidence): scans whose pose the
     # localiser's covariance or the scan's own fit to M_{i-1} calls unsure change nothing.
-    pose_check: bool = True
+    # None: as the profile has it.
+    pose_check: bool | None = None
     pose_check_config: object | None = None   # a localization.confidence.PoseCheckConfig
+    # Beside the updater of the profile, the paper profile's on the same scans and poses, for
+    # the report's comparison columns (only when the run's profile is not the paper's)
+    compare_paper: bool = True
     resume: bool = False       # continue the run in ``out`` after its last finished session
     method: str = "paper"      # what updates the map: one of scenarios.methods.METHODS
 

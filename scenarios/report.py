@@ -51,6 +51,25 @@ def _method_note(metrics: dict) -> str:
     return "" if method == "paper" else f", method {method}"
 
 
+def _profile_lines(metrics: dict) -> list[str]:
+    """The profile the run's robot software started from and every key that differs from it;
+    the paper profile's comparison, when there is one."""
+    profile = metrics.get("profile")
+    if profile is None:         # a run recorded before profiles
+        return []
+    out = [f"Profile `{profile}` (docs/configuration.md), pose check "
+           f"{'on' if metrics.get('pose_check') else 'off'}."]
+    diffs = metrics.get("differences") or []
+    if diffs:
+        out.append("Keys over the profile: " + "; ".join(f"`{d}`" for d in diffs) + " (the "
+                   "localiser's alphas are the simulated robot's odometry noise).")
+    if any("comparison" in s for s in metrics["sessions"]):
+        out.append("The columns and rows marked *paper profile* are the paper profile's "
+                   "updater fed the same scans at the same poses, from the same M(i-1), as a "
+                   "comparison (`--profile paper` runs the paper's method throughout).")
+    return out + [""]
+
+
 def render_report(metrics: dict) -> str:
     """report.md: the paper's Tables I and II and the project's own tables."""
     sessions = [s for s in metrics["sessions"] if "change_detection" in s]
@@ -58,6 +77,7 @@ def render_report(metrics: dict) -> str:
            f"Seed {metrics['seed']}{', quick routes' if metrics.get('quick') else ''}"
            f"{_method_note(metrics)}; "
            f"wall time {metrics['wall_time_s']:.1f} s on {machine_summary()}.", ""]
+    out += _profile_lines(metrics)
     first = metrics["sessions"][0]
     if "initial_vs_truth" in first.get("map_metrics", {}):
         m = first["map_metrics"]["initial_vs_truth"]
@@ -65,45 +85,73 @@ def render_report(metrics: dict) -> str:
                 f"CC {m['cc']:.2f} %, MS {m['ms']:.2f} %, OPDF {m['opdf']:.2f} %.", ""]
     if not sessions:
         return "\n".join(out) + "\n"
+    # the paper profile's updater on the same scans and poses, beside the run's own
+    compared = all("comparison" in s for s in sessions)
+    out += _table_one(sessions, compared) + _table_two(sessions)
+    out += _change_table(sessions, compared, metrics.get("profile") or "paper")
+    out += _resources_table(sessions)
+    out += ["", "Figures: `fig_maps_<session>.png` (M(i-1), M(i), G(i); removed cells red, "
+            "added green), `fig_trajectories_<session>.png`, `fig_metrics.png`.", ""]
+    return "\n".join(out)
 
-    out += ["## Map quality (the paper's Table I)", "",
-            "| session | metric | M(i-1) vs G(i) | M(i) vs G(i) | oracle vs G(i) |",
-            "|---|---|---|---|---|"]
+
+def _table_one(sessions, compared: bool) -> list[str]:
+    other = " | M(i), paper profile" if compared else ""
+    out = ["## Map quality (the paper's Table I)", "",
+           f"| session | metric | M(i-1) vs G(i) | M(i) vs G(i){other} | oracle vs G(i) |",
+           "|---|---|---|---|---|" + ("---|" if compared else "")]
     for s in sessions:
         mm = s["map_metrics"]
         for key, label in (("cc", "CC %"), ("ms", "MS %"), ("opdf", "OPDF %")):
+            paper = f" | {_fmt(s['comparison']['map_metrics']['updated_vs_truth'][key])}" \
+                if compared else ""
             out.append(f"| {s['name']} | {label} | {_fmt(mm['previous_vs_truth'][key])} | "
-                       f"{_fmt(mm['updated_vs_truth'][key])} | "
+                       f"{_fmt(mm['updated_vs_truth'][key])}{paper} | "
                        f"{_fmt(mm['oracle_vs_truth'][key])} |")
-    out += ["", "## Localisation, APE in metres (the paper's Table II)", "",
-            "| session | map | max | mean | median | min | RMSE | std |",
-            "|---|---|---|---|---|---|---|---|"]
+    return out
+
+
+def _table_two(sessions) -> list[str]:
+    out = ["", "## Localisation, APE in metres (the paper's Table II)", "",
+           "| session | map | max | mean | median | min | RMSE | std |",
+           "|---|---|---|---|---|---|---|---|"]
     for s in sessions:
         for key, label in (("initial_map", "M1"), ("previous_map", "M(i-1)")):
             a = s["localization"][key]
             out.append(f"| {s['name']} | {label} | " + " | ".join(
                 _fmt(a[k], 3) for k in ("max", "mean", "median", "min", "rmse", "std")) + " |")
-    out += ["", "## Change detection (one cell of slack)", "",
-            "| session | precision | recall | F1 | recall_all | changes | targets | ghosts |",
-            "|---|---|---|---|---|---|---|---|"]
+    return out
+
+
+def _change_table(sessions, compared: bool, profile: str) -> list[str]:
+    out = ["", "## Change detection (one cell of slack)", "",
+           "| session | profile | precision | recall | F1 | recall_all | changes | targets | "
+           "ghosts |", "|---|---|---|---|---|---|---|---|---|"]
     for s in sessions:
-        cd = s["change_detection"]
-        out.append(f"| {s['name']} | {_fmt(cd['precision'], 3)} | {_fmt(cd['recall'], 3)} | "
-                   f"{_fmt(cd['f1'], 3)} | {_fmt(cd['recall_all'], 3)} | {cd['changes']} | "
-                   f"{cd['target_cells']} | {s['ghost_cells']} |")
-    out += ["", "## Resources", "",
-            "| session | scans | processed | dropped as lost | updater CPU s | "
-            "localiser CPU s | updater state MB | peak RSS MB | simulated s |",
-            "|---|---|---|---|---|---|---|---|---|"]
+        rows = [(profile, s["change_detection"], s["ghost_cells"])]
+        if compared:
+            c = s["comparison"]
+            rows.append((c["profile"], c["change_detection"], c["ghost_cells"]))
+        for name, cd, ghosts in rows:
+            out.append(f"| {s['name']} | {name} | {_fmt(cd['precision'], 3)} | "
+                       f"{_fmt(cd['recall'], 3)} | {_fmt(cd['f1'], 3)} | "
+                       f"{_fmt(cd['recall_all'], 3)} | {cd['changes']} | {cd['target_cells']} | "
+                       f"{ghosts} |")
+    return out
+
+
+def _resources_table(sessions) -> list[str]:
+    out = ["", "## Resources", "",
+           "| session | scans | processed | dropped as lost | updater CPU s | "
+           "localiser CPU s | updater state MB | peak RSS MB | simulated s |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for s in sessions:
         r = s["resources"]
         out.append(f"| {s['name']} | {r['scans']} | {r['scans_processed']} | "
                    f"{r['scans_dropped_as_lost']} | {r['updater_cpu_s']:.2f} | "
                    f"{r['localizer_cpu_s']:.2f} | {r['updater_state_bytes'] / 1e6:.2f} | "
                    f"{r['peak_rss_mb']:.0f} | {r['simulated_s']:.0f} |")
-    out += ["", "Figures: `fig_maps_<session>.png` (M(i-1), M(i), G(i); removed cells red, "
-            "added green), `fig_trajectories_<session>.png`, `fig_metrics.png`.", ""]
-    return "\n".join(out)
+    return out
 
 
 def _map_rgb(grid: OccupancyGrid) -> np.ndarray:

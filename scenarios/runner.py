@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +19,19 @@ from tqdm import tqdm
 
 import sim
 from gridmap import OccupancyGrid
+from gridmap.config import DEFAULT_PROFILE, check_profile
 from gridmap.mapping import LogOddsMapper
+from localization import LocalizerConfig
+from localization.confidence import PoseCheckConfig
+from robot.robot_config import POSE_CHECK_ON, differences
+from updater import UpdaterConfig
 
 from . import checkpoint
 from .catalog import find_scenario
 from .options import RunError, RunOptions, SessionObserver
 from .report import write_outputs, write_session_maps, write_session_outputs
-from .session import SessionResult, UpdateSession, map_metrics, session_seeds
+from .session import (SessionResult, UpdateSession, localizer_config_for, map_metrics,
+                      session_seeds)
 
 MAX_SEED = 2**63 - 1
 
@@ -94,10 +100,13 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     """One session i >= 2: the robot follows its route; localise, update M_{i-1} into M_i,
     score against G_i."""
     world = sim.World(scenario, session, seeds["world"])
+    options = resolve_profile(scenario, options)
+    compare = options.compare_paper and options.profile != "paper" and options.method == "paper"
     us = UpdateSession(scenario, session, world, previous, initial, seeds["localizer"],
                        options.updater_config, options.localizer_config,
                        pose_check=options.pose_check, pose_check_config=options.pose_check_config,
-                       method=options.method)
+                       method=options.method,
+                       comparison=UpdaterConfig.profile("paper") if compare else None)
     observer = options.observer
     if observer is not None:
         observer.session_start(scenario, session, world, previous, initial, us.updater,
@@ -115,6 +124,26 @@ def run_update_session(scenario, session: int, previous: OccupancyGrid, initial:
     if observer is not None:
         observer.session_end(result)
     return result
+
+
+def resolve_profile(scenario, options: RunOptions) -> RunOptions:
+    """``options`` with every configuration left None (or given as a mapping of keys) made
+    the profile's: the updater's, the pose check's and whether it runs, and the localiser's
+    with the scenario's odometry noise as its alphas (the robot's own, as one tunes AMCL's
+    alphas for a robot) and the keys given laid over it."""
+    profile = options.profile or DEFAULT_PROFILE
+    check_profile(profile, RunError, "profile")
+    loc = options.localizer_config
+    if loc is None or isinstance(loc, dict):
+        alphas = localizer_config_for(scenario)
+        base = {k: getattr(alphas, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4")}
+        loc = LocalizerConfig.profile(profile, {**base, **(loc or {})})
+    return replace(
+        options, profile=profile, localizer_config=loc,
+        updater_config=options.updater_config or UpdaterConfig.profile(profile),
+        pose_check_config=options.pose_check_config or PoseCheckConfig.profile(profile),
+        pose_check=POSE_CHECK_ON[profile][0] if options.pose_check is None
+        else options.pose_check)
 
 
 def light_result(res: SessionResult, keep_map: bool = False) -> SessionResult:
@@ -147,6 +176,7 @@ def run_scenario(scenario: str | Path | None = None, options: RunOptions | None 
     scn = sim.load_scenario(path)
     if options.quick:
         scn = sim.quick_variant(scn)
+    options = resolve_profile(scn, options)
     seed = scn.seed if options.seed is None else options.seed
     n = len(scn.sessions) if options.sessions is None else max(1, min(options.sessions,
                                                                        len(scn.sessions)))
@@ -206,6 +236,10 @@ def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions
 
     metrics = {
         "scenario": scn.name, "seed": seed, "quick": options.quick, "method": options.method,
+        "profile": options.profile, "differences": differences(
+            options.profile, options.updater_config, options.localizer_config,
+            options.pose_check_config),
+        "pose_check": options.pose_check,
         "sessions": [r.metrics for r in results],
         "wall_time_s": wall_before + time.perf_counter() - wall0,
     }

@@ -20,7 +20,7 @@ import sim
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
 from gridmap.metrics import compare_maps
 from localization import LocalizerConfig, MonteCarloLocalizer
-from localization.confidence import PoseCheck
+from localization.confidence import PoseCheck, PoseCheckConfig
 from robot.methods import make_method
 from robot.pipeline import RobotPipeline
 
@@ -116,7 +116,7 @@ class UpdateSession:
     def __init__(self, scenario, session: int, world, reference: OccupancyGrid,
                  initial: OccupancyGrid, localizer_seed, updater_config=None,
                  localizer_config=None, pose_check: bool = True, pose_check_config=None,
-                 method: str = "paper"):
+                 method: str = "paper", comparison=None):
 
         self.scenario, self.index, self.world = scenario, session, world
         self.name = scenario.sessions[session].name
@@ -135,8 +135,14 @@ class UpdateSession:
         self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
         self.localizer.initialize(start, cov)
         self.updater = make_method(method, reference, updater_config)
-        guard = PoseCheck(reference, pose_check_config) if pose_check else None
+        # the project's own localiser places the scans: refined as the profile says
+        check = pose_check_config if pose_check_config is not None else PoseCheckConfig()
+        guard = PoseCheck(reference, check.for_poses(own_localizer=True)) if pose_check else None
         self.pipeline = RobotPipeline(self.updater, self.localizer, guard)
+        # ``comparison``: an updater configuration run beside, on the same scans at the same
+        # poses, with no pose check (the report's comparison columns)
+        self.comparison = None if comparison is None else make_method("paper", reference,
+                                                                      comparison)
         # the comparison of the evaluation: the same localiser on M1, feeding no updater
         initial_localizer = MonteCarloLocalizer(initial, localizer_config, seed=localizer_seed)
         initial_localizer.initialize(start, cov)
@@ -161,6 +167,8 @@ class UpdateSession:
         step = self.pipeline.step(msg.scan, mount, odometry=msg.odom_pose)
         est, report = step.robot_pose, step.report
         est_init = self.pipeline_initial.step(msg.scan, mount, odometry=msg.odom_pose).robot_pose
+        if self.comparison is not None and est is not None and step.report is not None:
+            self.comparison.process(msg.scan, est.compose(mount), odometry=msg.odom_pose)
         if report.processed:
             clean = world.scan_without_people(msg.true_pose, msg.lidar)
             self.counter.add_scan(msg.true_pose.compose(mount), clean.ranges, clean.angles())
@@ -189,6 +197,7 @@ class UpdateSession:
         return {"scans": c.scans, "scans_processed": c.scans_processed,
                 "scans_dropped_as_lost": c.scans_dropped_as_lost,
                 "scans_refused_by_pose_check": c.scans_refused_by_pose_check,
+                "scans_corrected_by_pose_check": c.scans_corrected_by_pose_check,
                 "localizer_updates": c.localizer_updates}
 
     # --- now --------------------------------------------------------------------------------------
@@ -248,6 +257,14 @@ class UpdateSession:
                 **self.counts,
             },
         }
+        if self.comparison is not None:
+            other = self.comparison.updated_map()
+            metrics["comparison"] = {
+                "profile": "paper",
+                "map_metrics": {"updated_vs_truth": map_metrics(other, self.truth)},
+                "change_detection": ev.change_detection(self.reference, other, self.truth,
+                                                        observable),
+                "ghost_cells": ev.ghost_cells(other, self.truth, self.people_mask)}
         return SessionResult(self.name, updated, self.truth, previous=self.reference,
                              oracle=oracle, trajectory=self.trajectory, metrics=metrics,
                              masks={"observable": observable, "people": self.people_mask,

@@ -10,7 +10,8 @@ The spec (YAML)::
     methods: [paper, hybrid, fuse, remap, none]  # scenarios.methods.METHODS (default: paper)
     quick: true                          # the quick routes of `mapupdate run --quick`
     sessions: 3                          # the first K sessions only (default: all)
-    config: {updater: {fill_gaps: true}} # the base robot configuration, as --config reads it
+    profile: robot                       # robot (default) or paper, or a list of both to compare
+    config: {updater: {fill_gaps: true}} # keys over the profile, as --config reads them
     grid: {updater.threshold: [5, 7, 9]} # dotted keys into the configuration's sections
 
 Every spec error (an unknown key, an unknown method, an empty list, a grid key that is not a
@@ -51,6 +52,7 @@ from tqdm import tqdm
 import sim
 from gridmap import MapUpdatingError
 from gridmap.atomic import write_atomically
+from gridmap.config import check_profile
 from gridmap.files import (MAX_TEXT_BYTES, FileInputError, check_regular_file, load_yaml,
                            parse_yaml, read_text)
 from gridmap.suggest import did_you_mean
@@ -64,7 +66,7 @@ from scenarios.runner import MAX_SEED, RunOptions, run_scenario
 from .study_report import RUN_KEY_CHARS, StudyFolderError, _json, session_rows, summarise
 from .sweep_ray import check_address, ray_tasks, require_ray
 
-SPEC_KEYS = ("scenarios", "seeds", "methods", "quick", "sessions", "config", "grid")
+SPEC_KEYS = ("scenarios", "seeds", "methods", "profile", "quick", "sessions", "config", "grid")
 # The most runs one spec may ask for (the study of 20 warehouses x 3 seeds x 5 methods is 300;
 # what a run costs is in benchmarks/RESULTS.md).
 MAX_RUNS = 10_000
@@ -205,8 +207,27 @@ def _checked_spec(spec, source: str, base: Path) -> dict:
                           not 1 <= n <= MAX_SESSIONS):
         _fail(source, "sessions", f"expected an integer in [1, {MAX_SESSIONS}], got {_show(n)}")
     out["config"] = _base_config(spec.get("config"), source)
+    named = out["config"].pop("profile")      # the spec's own key says which, else config's
+    given = spec.get("profile")
+    if given is None and isinstance(spec.get("config"), dict) and "profile" in spec["config"]:
+        given = named
+    out["profile"] = _profiles(given, source)
     out["grid"] = _grid(spec.get("grid"), out["config"], source)
     return out
+
+
+def _profiles(node, source: str) -> list[str | None]:
+    """The profiles of ``profile``: one name or a list; [None] (the default, unnamed in the
+    runs' keys) when the spec has none."""
+    if node is None:
+        return [None]
+    names = [node] if isinstance(node, str) else _nonempty_list(node, source, "profile")
+    for j, name in enumerate(names):
+        check_profile(name, SweepError, f"{source}: profile" + (
+            "" if isinstance(node, str) else f"[{j}]"))
+    if len(set(names)) != len(names):
+        _fail(source, "profile", f"a profile is listed twice: {_show(node)}")
+    return list(names)
 
 
 def _scenarios(entries, source: str, base: Path) -> list[dict]:
@@ -276,7 +297,7 @@ def _generate_entry(node, source: str, key: str) -> dict:
 
 def _base_config(node, source: str) -> dict:
     if node is None:
-        return {}
+        return {"profile": None}
     if not isinstance(node, dict):
         _fail(source, "config", f"expected a mapping of sections, got {type(node).__name__}")
     try:
@@ -328,7 +349,8 @@ def _count_runs(spec: dict, source: str) -> int:
     for entry in spec["scenarios"] if isinstance(spec["scenarios"], list) else [None]:
         generate = entry.get("generate") if isinstance(entry, dict) else None
         scenarios += length(generate.get("seeds")) if isinstance(generate, dict) else 1
-    n = scenarios * length(spec.get("seeds")) * length(spec.get("methods"))
+    n = scenarios * length(spec.get("seeds")) * length(spec.get("methods")) \
+        * length(spec.get("profile"))
     grid = spec.get("grid")
     for values in grid.values() if isinstance(grid, dict) else ():
         n *= length(values)
@@ -392,12 +414,17 @@ def plan(spec: dict, out_dir: Path, progress: bool = False) -> list[RunSpec]:
     for name, path in scenario_files(spec, out_dir, progress):
         for seed in spec["seeds"]:
             for method in spec["methods"]:
-                for point in _points(spec["grid"]):
-                    parts = [name, "seed-default" if seed is None else f"seed{seed}", method]
-                    parts += [f"{k}={v}" for k, v in point.items()]
-                    runs.append(RunSpec(_slug("__".join(parts)), name, str(path.resolve()),
-                                        seed, method, spec["quick"], spec["sessions"],
-                                        _with_point(spec["config"], point), point))
+                for profile in spec.get("profile", [None]):
+                    for point in _points(spec["grid"]):
+                        parts = [name, "seed-default" if seed is None else f"seed{seed}",
+                                 method] + ([f"profile-{profile}"] if profile else [])
+                        parts += [f"{k}={v}" for k, v in point.items()]
+                        config = _with_point(spec["config"], point)
+                        if profile:
+                            config["profile"] = profile
+                        runs.append(RunSpec(_slug("__".join(parts)), name,
+                                            str(path.resolve()), seed, method, spec["quick"],
+                                            spec["sessions"], config, point))
     return runs
 
 
@@ -432,10 +459,14 @@ def execute(run: RunSpec, runs_dir) -> dict:
     config = load_robot_config(run.config or None, source=run.key)
     clock = SessionClock()
     t0 = time.perf_counter()
+    keys = config.given
     result = run_scenario(run.scenario_file, RunOptions(
         out=folder, seed=run.seed, sessions=run.sessions, quick=run.quick, progress=False,
-        updater_config=config.updater, localizer_config=config.localizer,
-        pose_check_config=config.pose_check, observer=clock, method=run.method))
+        profile=config.profile,
+        updater_config=config.updater if "updater" in keys else None,
+        localizer_config=keys.get("localizer"),
+        pose_check_config=config.pose_check if "pose_check" in keys else None,
+        observer=clock, method=run.method, compare_paper=False))
     record = {"format": RESULT_FORMAT, "run": run.definition(),
               "wall_s": time.perf_counter() - t0,
               "rows": session_rows(folder, result.metrics, clock.wall)}

@@ -196,7 +196,7 @@ def _runner_session(scn, seed, session=1):
     seeds = session_seeds(seed, len(scn.sessions))
     m1 = build_initial_map(scn, 0, seeds[0])
     return run_update_session(scn, session, m1.updated, m1.updated, seeds[session],
-                              RunOptions(progress=False))
+                              RunOptions(progress=False, compare_paper=False))
 
 
 def _without_resources(scores):

@@ -4,7 +4,7 @@ the map into the unknown: of the formerly unknown cells the later scans observe 
 times, at least 90 % get a known state (free, or occupied within a cell of an occupied cell)
 agreeing with a map of the whole place, and no occupied cell of the map is freed.
 
-``mapupdate update`` grows the map by default (``robot_config.ROBOT_UPDATER_DEFAULTS``); the
+``mapupdate update`` grows the map by default (``UpdaterConfig.profile("robot")``); the
 updater's own defaults do not (``UpdaterConfig.grow_into_unknown``). Two places:
 the synthetic hall of tests/synthetic_hall.py with its top right bay unknown in the
 map and entered by the route; and the Intel Research Lab log (../shared/data) with a map from

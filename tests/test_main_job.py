@@ -53,10 +53,12 @@ def test_quick_run_updated_maps_beat_the_previous_ones(quick_run):
 
 
 def test_the_pose_check_guards_the_main_job_by_default(quick_run):
-    """The runner asks the pose check before every scan it would process: refusals are counted
-    and the run records the check as on, so --resume keeps it."""
+    """The runner asks the pose check before every scan it would process: the scans it
+    refused or placed at a better pose are counted, and the run records the check as on, so
+    --resume keeps it."""
     metrics = json.loads((quick_run / "metrics.json").read_text())
-    asked = [s["resources"]["scans_refused_by_pose_check"] for s in metrics["sessions"][1:]]
+    asked = [s["resources"]["scans_refused_by_pose_check"]
+             + s["resources"]["scans_corrected_by_pose_check"] for s in metrics["sessions"][1:]]
     assert sum(asked) > 0
     manifest = json.loads((quick_run / "state" / "run.json").read_text())
     assert manifest["pose_check"] is True

@@ -367,7 +367,7 @@ def test_maps_state_and_metrics_are_flushed_to_disk_before_and_after_the_rename(
     monkeypatch.setattr(atomic.os, "fsync", fsync)
     grid = reference_grid()
     save_map(grid, tmp_path / "m.yaml")                              # image, then YAML
-    MapUpdater(grid).save(tmp_path / "s.npz")
+    MapUpdater(grid, profile="paper").save(tmp_path / "s.npz")
     atomic.write_atomically(tmp_path / "metrics.json", "{}\n")
     sizes = [(tmp_path / n).stat().st_size for n in ("m.pgm", "m.yaml", "s.npz", "metrics.json")]
     assert synced == [sizes[0], "folder", sizes[1], "folder", sizes[2], "folder", sizes[3],

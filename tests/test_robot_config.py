@@ -43,23 +43,45 @@ def one_line(err: str) -> str:
 
 
 # --- the loader --------------------------------------------------------------------------------
-def test_a_valid_file_gives_each_section_its_dataclass(tmp_path):
+def test_a_valid_file_lays_its_keys_over_the_robot_profile(tmp_path):
     config = load_robot_config(write_yaml(tmp_path / "robot.yaml", VALID))
-    assert config.updater == UpdaterConfig(threshold=9)
+    assert config.profile == "robot"
+    assert config.updater == UpdaterConfig.profile("robot", {"threshold": 9})
+    assert config.updater.unanimous_min == 3 and config.updater.free_with_neighbours
     assert config.localizer == LocalizerConfig(max_particles=900, alpha1=0.05, alpha2=0.01,
-                                               alpha3=0.05, alpha4=0.01)
-    assert config.pose_check == PoseCheckConfig(slack_cells=1, max_gain=0.02)
+                                               alpha3=0.05, alpha4=0.01, update_min_d=0.1)
+    assert config.pose_check == PoseCheckConfig.profile("robot", {"slack_cells": 1,
+                                                                  "max_gain": 0.02})
     assert load_robot_config(config.to_dict()) == config
+    paper = load_robot_config(VALID, profile="paper")
+    assert paper.updater == UpdaterConfig(threshold=9)
+    assert paper.pose_check == PoseCheckConfig(slack_cells=1, max_gain=0.02)
+    assert not paper.use_pose_check and config.use_pose_check
 
 
-def test_sections_left_out_or_empty_are_not_given(tmp_path):
+def test_sections_left_out_or_empty_are_the_profiles(tmp_path):
     path = tmp_path / "robot.yaml"
     path.write_text("updater:\nlocalizer: {}\npose_check:\n  cap: 1\n")
     config = load_robot_config(path)
-    assert (config.updater, config.localizer) == (None, None)
-    assert config.pose_check == PoseCheckConfig(cap=1.0)
+    assert (config.updater, config.localizer) == (UpdaterConfig.profile("robot"),
+                                                  LocalizerConfig.profile("robot"))
+    assert config.pose_check == PoseCheckConfig.profile("robot", {"cap": 1.0})
+    assert config.differences() == ["pose_check.cap: 1.0 (profile robot: 0.2)"]
     path.write_text("")
     assert load_robot_config(path) == RobotConfig() == load_robot_config(None)
+    assert RobotConfig().differences() == []
+
+
+def test_the_file_may_name_its_profile_and_the_command_line_wins(tmp_path):
+    path = write_yaml(tmp_path / "robot.yaml", {"profile": "paper", "updater": {"threshold": 8}})
+    assert load_robot_config(path).updater == UpdaterConfig(threshold=8)
+    assert load_robot_config(path, profile="robot").updater == \
+        UpdaterConfig.profile("robot", {"threshold": 8})
+    with pytest.raises(ConfigError, match=r"robot.yaml: profile: unknown profile 'papr' "
+                                          r"\(did you mean 'paper'\?\)"):
+        load_robot_config({"profile": "papr"}, source="robot.yaml")
+    with pytest.raises(ConfigError, match=r"--profile: unknown profile 'robt'"):
+        load_robot_config(None, profile="robt")
 
 
 @pytest.mark.parametrize("doc, message, near", MISSPELT)
@@ -148,14 +170,15 @@ def test_update_hands_the_sections_to_the_replay(tmp_path, monkeypatch):
     cfg = write_yaml(tmp_path / "cfg.yaml", VALID)
     assert main(["update", "--map", "m.yaml", "--log", "l.log", "--out", "o.yaml", "--config",
                  str(cfg), "--pose-check", "--no-progress"]) == 0
-    assert seen["updater_config"] == UpdaterConfig(threshold=9)
+    assert seen["updater_config"] == UpdaterConfig.profile("robot", {"threshold": 9})
     placement = seen["placement"]
     assert placement.localizer_config.max_particles == 900
-    assert placement.pose_check_config == PoseCheckConfig(slack_cells=1, max_gain=0.02)
-    assert placement.pose_check is True
+    assert placement.pose_check_config == PoseCheckConfig.profile(
+        "robot", {"slack_cells": 1, "max_gain": 0.02})
+    assert placement.pose_check is True and placement.profile == "robot"
 
 
-@pytest.mark.parametrize("flag, on", [([], True), (["--pose-check"], True),
+@pytest.mark.parametrize("flag, on", [([], None), (["--pose-check"], True),
                                       (["--no-pose-check"], False)])
 def test_run_keeps_the_pose_check_switch_beside_the_file(tmp_path, monkeypatch, flag, on):
     from types import SimpleNamespace
@@ -166,8 +189,8 @@ def test_run_keeps_the_pose_check_switch_beside_the_file(tmp_path, monkeypatch, 
     cfg = write_yaml(tmp_path / "cfg.yaml", {"pose_check": {"slack_cells": 1}})
     assert main(["run", "--config", str(cfg), "--no-progress", *flag]) == 0
     (opts,) = seen
-    assert opts.pose_check is on
-    assert opts.pose_check_config == PoseCheckConfig(slack_cells=1)
+    assert opts.pose_check is on        # None: the profile's, which the runner applies
+    assert opts.pose_check_config == PoseCheckConfig.profile("robot", {"slack_cells": 1})
     assert (opts.updater_config, opts.localizer_config) == (None, None)
 
 
@@ -195,9 +218,10 @@ def configured_run(tmp_path_factory):
 def test_run_gives_the_sessions_the_configured_components(configured_run):
     out, given = configured_run
     (updater, localizer, pose_check), = given
-    assert updater.threshold == 9 and updater == UpdaterConfig(threshold=9)
+    assert updater.threshold == 9 and updater == UpdaterConfig.profile("robot", {"threshold": 9})
     assert localizer.max_particles == 900 and localizer.alpha1 == 0.05
-    assert pose_check == PoseCheckConfig(slack_cells=1, max_gain=0.02)
+    assert localizer.update_min_d == 0.1            # the robot profile's, under the keys
+    assert pose_check == PoseCheckConfig.profile("robot", {"slack_cells": 1, "max_gain": 0.02})
     recorded = json.loads((out / "state" / "run.json").read_text())
     assert recorded["updater_config"]["threshold"] == 9
 
@@ -234,10 +258,15 @@ def test_the_gym_env_takes_the_config_as_a_dict(room_and_map):
     room, reference = room_and_map
     env = WarehouseMapUpdateEnv(room, "W2", reference_map=reference, config=VALID)
     env.reset(seed=3)
-    assert env.session.updater.config == UpdaterConfig(threshold=9)
+    assert env.session.updater.config == UpdaterConfig.profile("robot", {"threshold": 9})
     assert env.session.localizer.config.max_particles == 900
-    assert env.session.pipeline.pose_check.config == PoseCheckConfig(slack_cells=1,
-                                                                     max_gain=0.02)
+    assert env.session.pipeline.pose_check.config == PoseCheckConfig.profile(
+        "robot", {"slack_cells": 1, "max_gain": 0.02})
+    env = WarehouseMapUpdateEnv(room, "W2", reference_map=reference, config=VALID,
+                                profile="paper")
+    env.reset(seed=3)
+    assert env.session.updater.config == UpdaterConfig(threshold=9)
+    assert env.session.pipeline.pose_check is None      # the paper profile has none
     env = WarehouseMapUpdateEnv(room, "W2", reference_map=reference,
                                 updater_config=UpdaterConfig(threshold=8),
                                 config={"pose_check": {"slack_cells": 1}}, pose_check=False)

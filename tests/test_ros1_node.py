@@ -493,3 +493,26 @@ def test_a_save_path_that_is_a_folder_is_refused_in_one_line(ros, bags):
     assert p.stderr.strip().splitlines() == [
         "mapupdate ros1: error: parameter '~save_path' must name a map file (.yaml), got the "
         "folder '/'"]
+
+
+def test_a_parameter_at_its_profile_value_gives_the_map_the_profile_gives(ros, bags, tmp_path):
+    """Private parameters are laid over the profile key by key: one updater key at the robot
+    profile's value gives `mapupdate update`'s map, and with `_profile:=paper` the map of
+    `mapupdate update --profile paper`."""
+    for name, params, more in (("one_key", ["_updater/threshold:=7"], ()),
+                               ("paper_profile", ["_profile:=paper", "_updater/threshold:=7"],
+                                ("--profile", "paper"))):
+        save = tmp_path / f"{name}.yaml"
+        node = ros.node("--map", str(bags / "run/maps/M_W1.yaml"), f"_save_path:={save}",
+                        *params, f"__name:={name}", name=name)
+        ros.play(bags / "bags/W2.bag", rate=5.0)
+        time.sleep(1.0)
+        assert "success: True" in ros.call(f"/{name}/save")
+        expected = update(bags, bags / "run/maps/M_W1.yaml", bags / "bags/W2.bag",
+                          tmp_path / f"{name}-update.yaml", *more)
+        health = ros.health(name, tmp_path / f"{name}.json")
+        if health.get("scans_dropped_behind", "0") == "0":
+            assert np.array_equal(load_map(save).data, expected)
+        else:        # a loaded machine dropped scans at 5x: the map may differ a little
+            assert (load_map(save).data != expected).mean() < 0.01, health
+        ros.stop(node)

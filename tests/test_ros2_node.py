@@ -596,3 +596,22 @@ def test_with_a_store_the_node_commits_versions_and_serves_the_latest_approved(g
     ros2_tools.wait_until(serves_v3, 60, "the node serving the approved v3")
     assert node.poll() is None and graph.stop(node) == 0
     assert "Traceback" not in graph.log(name)
+
+
+@needs_tf
+def test_a_parameter_at_its_profile_value_gives_the_map_the_profile_gives(graph, recording):
+    """Parameters are laid over the profile key by key: one updater key at the robot
+    profile's value changes nothing of the map, and with the paper profile the node saves the
+    map `mapupdate update --profile paper` makes."""
+    one_key = _replay_and_save(graph, recording, "one_key", "tf", "-p", "updater.threshold:=7")
+    assert np.array_equal(one_key["saved"], load_map(recording / "update.yaml").data)
+    graph.stop(one_key["node"])
+    paper = _replay_and_save(graph, recording, "paper_profile", "tf", "-p", "profile:=paper",
+                             "-p", "updater.threshold:=7")
+    graph.stop(paper["node"])
+    expected = recording / "update_paper.yaml"
+    assert main(["update", "--map", str(recording / "run/maps/M_W1.yaml"), "--log",
+                 str(recording / "bags/W2.bag"), "--out", str(expected), "--profile", "paper",
+                 "--no-progress"]) == 0
+    assert np.array_equal(paper["saved"], load_map(expected).data)
+    assert not np.array_equal(paper["saved"], one_key["saved"])   # the profiles differ

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapUpdatingError, OccupancyGrid
+from localization.confidence import PoseCheckConfig
+from updater import UpdaterConfig
 from robot.ros_common.grids import changed_box, grid_from_message, message_fields
 from robot.ros_common.settings import (NodeSettings, NodeSettingsError, Ros2Settings,
                                        node_settings, refuse_saving_over_the_map)
@@ -96,15 +98,27 @@ def test_the_node_smooths_recorded_poses_as_mapupdate_update_does_by_default():
     assert node_settings({"smooth_poses": 0.0})[0].smooth_poses == 0.0
 
 
-def test_the_node_grows_the_map_into_the_unknown_as_update_does_unless_configured():
-    """Without an ``updater`` section in a ``--config`` file the base is the robot's defaults
-    (the updater's, with the growth into the unknown), which the node's parameters override
-    key by key; a file's section is the updater's whole configuration, as for ``mapupdate
-    update`` (the class's defaults for the keys it leaves out)."""
-    _, updater, _ = node_settings({})
-    assert updater.grow_into_unknown is True
-    assert node_settings({"updater": {"threshold": 6}})[1].grow_into_unknown is True
-    assert node_settings({}, {"updater": {"threshold": 6}})[1].grow_into_unknown is False
+def test_the_node_lays_the_file_and_its_parameters_over_the_profile_key_by_key():
+    """The robot profile (with the growth into the unknown), a ``--config`` file's keys over
+    it, the node's parameters over those: a key left out keeps the profile's value, as for
+    ``mapupdate update``; ``profile:=paper`` starts from the paper's."""
+    from robot.robot_config import POSE_CHECK_ON
+
+    settings, updater, check = node_settings({})
+    assert updater == UpdaterConfig.profile("robot") and updater.grow_into_unknown is True
+    assert check == PoseCheckConfig.profile("robot")
+    assert settings.profile == "robot" and settings.use_pose_check is POSE_CHECK_ON["robot"][0]
+    assert node_settings({"updater": {"threshold": 6}})[1] == \
+        UpdaterConfig.profile("robot", {"threshold": 6})
+    from_file = node_settings({"updater": {"min_run": 4}}, {"updater": {"threshold": 6}})[1]
+    assert from_file == UpdaterConfig.profile("robot", {"threshold": 6, "min_run": 4})
+    settings, updater, check = node_settings({"profile": "paper"}, {"updater": {"threshold": 6}})
+    assert updater == UpdaterConfig(threshold=6) and check == PoseCheckConfig()
+    assert settings.use_pose_check is False
+    assert node_settings({}, {"profile": "paper"})[0].profile == "paper"
+    assert node_settings({"use_pose_check": False})[0].use_pose_check is False
+    with pytest.raises(NodeSettingsError, match=r"parameter '~profile': unknown profile 'papr'"):
+        node_settings({"profile": "papr"})
 
 
 def test_the_method_is_the_papers_unless_the_parameter_names_another():
@@ -119,7 +133,6 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     from gridmap import Pose2D
     from robot.methods import make_method
     from robot.pipeline import RobotPipeline
-    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from robot.ros_common.health import Health, pipeline_values
     from updater import UpdaterConfig
 
@@ -134,7 +147,7 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     values = {}
     for method in ("paper", "fuse", "paper's own"):
         config = UpdaterConfig() if method == "paper's own" else \
-            UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+            UpdaterConfig.profile("robot")
         pipeline = RobotPipeline(make_method(method.split("'")[0], ref, config))
         for k in range(10):
             scan = world.full_scan(world.room_walls(), robot, 0.1 * k)

@@ -11,7 +11,7 @@ from robotlogs.rosbag import bag_topics
 from scenarios.session_bags import SessionBagRecorder
 from scenarios.observers import Observers
 from scenarios.runner import RunOptions, run_scenario
-from updater import UpdaterConfig
+from localization.confidence import PoseCheckConfig
 
 
 @pytest.fixture(scope="module")
@@ -38,12 +38,14 @@ def test_replay_of_recorded_localisation_gives_the_in_process_map(bag_run, fmt, 
     root, ros1, ros2 = bag_run
     bag = (ros1 if fmt == "ros1" else ros2).paths["W2"]
     out = tmp_path / "replayed.yaml"
-    # the run asked the pose check (the runner's default), so the replay asks it too; the
-    # run's updater has the class's defaults, not update's (which grow the map); and the
-    # localiser's map -> odom moves only at its filter updates, so update smooths nothing
+    # the run is the robot profile's: its pose check placed the localiser's poses where they
+    # fit, so the replay of those poses asks the check to do the same with a log's poses
+    # (which the profile takes as given); the localiser's map -> odom moves only at its
+    # filter updates, so update smooths nothing
+    check = PoseCheckConfig.profile("robot", {"refine_given": True})
     summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", LogSource(bag), Outputs(out),
-                              Placement(pose_check=True), updater_config=UpdaterConfig())
-    assert summary["pose_source"] == "recorded" and summary["scans_refused_by_pose_check"] > 0
+                              Placement(pose_check_config=check))
+    assert summary["pose_source"] == "recorded" and summary["scans_corrected_by_pose_check"] > 0
     assert summary["smoothing"] == {"window_s": 2.0, "scans_smoothed": 0, "restarts": 0}
     in_process = load_map(root / "run" / "maps" / "M_W2.yaml")
     replayed = load_map(out)

@@ -33,9 +33,11 @@ def _csv(path: Path) -> list[dict]:
 
 
 def _sessions(metrics_path: Path) -> list[dict]:
-    """A run's per-session metrics without what depends on the machine's timing."""
+    """A run's per-session metrics without what depends on the machine's timing, and
+    without the paper profile's comparison (a lone run adds it, a sweep's runs do not)."""
     m = json.loads(metrics_path.read_text())
     for s in m["sessions"]:
+        s.pop("comparison", None)
         r = s.get("resources", {})
         for k in [k for k in r if k.endswith("_s") or "rss" in k]:
             r.pop(k)

@@ -18,7 +18,6 @@ from mapupdate import main
 from robot.methods import make_method
 from mapupdate.summaries import update_lines as summary_lines
 from robot.replay import LogSource, Outputs, ScanClock, update_from_log
-from robot.robot_config import ROBOT_UPDATER_DEFAULTS
 from updater import ScanStatus, UpdaterConfig
 
 try:
@@ -28,7 +27,7 @@ except ImportError:  # tests collected as a package
 
 BOX = world.Rect(5.2, 5.2, 5.8, 5.8)      # in the map, gone from the room
 UNMAPPED = world.Rect(2.0, 2.0, 3.0, 3.0)  # floor the map leaves unknown
-ROBOT = UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)
+ROBOT = UpdaterConfig.profile("robot")
 
 
 def reference():
@@ -95,7 +94,7 @@ def test_cells_changed_are_counted_by_kind_as_the_two_maps_differ(room, capsys):
                         f"{n['free_to_occupied']} free cells occupied, "
                         f"{n['unknown_to_free'] + n['unknown_to_occupied']} unknown cells now "
                         f"known ({n['unknown_to_free']} free, {n['unknown_to_occupied']} "
-                        "occupied); method paper, poses recorded")
+                        "occupied); method paper, poses recorded, profile robot")
     s = update_from_log(room / "map.yaml", LogSource(log), Outputs(room / "again.yaml"))
     assert {k: s[k] for k in kinds} == n and s["known_to_unknown"] == 0
     assert s["cells_freed"] == n["occupied_to_free"] + n["unknown_to_free"]
@@ -130,7 +129,7 @@ def test_method_fuse_or_hybrid_through_the_command_line(room, capsys, method):
     assert freed > 100                                               # the box, mostly
     first = text.splitlines()[0]
     assert first.startswith(f"wrote {out}: {freed} occupied cells freed, ")
-    assert first.endswith(f"; method {method}, poses recorded")
+    assert first.endswith(f"; method {method}, poses recorded, profile robot")
     assert "evidence of change" not in text        # the method keeps no flag buffers
 
 
@@ -236,7 +235,7 @@ def test_when_no_cell_changed_the_summary_says_why(room, capsys):
                              "pending_outvoted": 0, "threshold": 7}
     listed = ", ".join(f"{rule} {k}" for rule, k in sorted(rules.items(),
                                                            key=lambda kv: (-kv[1], kv[0])))
-    assert lines[0] == f"wrote {out}: 0 cells changed; method paper, poses recorded"
+    assert lines[0] == f"wrote {out}: 0 cells changed; method paper, poses recorded, profile robot"
     confirming = sum(r.status is ScanStatus.GATED and r.unchanged_flags > 0 for r in reports)
     assert lines[2] == (f"  0 cells changed: {flagged} cells collected evidence of change "
                         f"below the threshold ({flagged} seen by fewer than 7 processed "

@@ -39,7 +39,7 @@ from ..ros_common.grids import changed_box, grid_from_message, message_fields
 from ..ros_common.health import Health, pipeline_values
 from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
-from ..ros_common.settings import (NodeSettings, check_save_path, node_settings,
+from ..ros_common.settings import (NodeSettings, check_save_path, node_settings, profile_line,
                                    refuse_saving_over_the_map)
 from ..ros_common.store_link import StoreLink
 from ..ros_common.transforms import TransformError, ascending, mirrored, planar
@@ -96,7 +96,8 @@ class MapUpdaterNode:
         self._published = None                   # publish the new map at the next period
 
     def _pipeline_on(self, reference: OccupancyGrid) -> RobotPipeline:
-        check = PoseCheck(reference, self.pose_check_config) \
+        # the node's poses come from outside (tf, amcl_pose): refined as the profile says
+        check = PoseCheck(reference, self.pose_check_config.for_poses(own_localizer=False)) \
             if self.settings.use_pose_check else None
         smoother = PoseSmoother(self.settings.smooth_poses) \
             if self.settings.smooth_poses > 0 else None
@@ -432,5 +433,6 @@ def run_node(map_path=None, config_path=None, argv=None) -> int:
     node.start(subscribe_map=reference is None)
     source = f"map {map_path}" if map_path else f"waiting for {settings.map_topic}"
     rospy.loginfo(f"map_updater: ready ({source}; scans on {', '.join(settings.scan_topics)})")
+    rospy.loginfo(f"map_updater: {profile_line(settings, updater_config, pose_check_config)}")
     rospy.spin()
     return 0

@@ -47,7 +47,7 @@ from ..ros_common.health import Health, pipeline_values
 from ..ros_common.poses import LivePoses, TfPoses
 from ..ros_common.queue import ScanQueue, scan_bytes
 from ..ros_common.scans import has_bad_ranges, usable_scan
-from ..ros_common.settings import Ros2Settings, node_settings
+from ..ros_common.settings import Ros2Settings, node_settings, profile_line
 from ..ros_common.transforms import TransformError, ascending, mirrored, planar, unit_quaternion
 
 WHEELS = ("ros-jazzy-rclpy ros-jazzy-rmw-fastrtps-cpp ros-jazzy-nav-msgs "
@@ -148,6 +148,7 @@ class MapUpdaterNode(LifecycleNode):
         s = self.settings
         self.get_logger().info(f"configured ({self.map_path or 'waiting for ' + s.map_topic}; "
                                f"scans on {', '.join(s.scan_topics)})")
+        self.get_logger().info(profile_line(s, self.updater_config, self.pose_check_config))
         return SUCCESS
 
     def _configure(self) -> None:
@@ -271,7 +272,9 @@ class MapUpdaterNode(LifecycleNode):
 
     def _pipeline_on(self, reference: OccupancyGrid, updater=None) -> RobotPipeline:
         s = self.settings
-        check = PoseCheck(reference, self.pose_check_config) if s.use_pose_check else None
+        # the node's poses come from outside (tf, amcl_pose): refined as the profile says
+        check = PoseCheck(reference, self.pose_check_config.for_poses(own_localizer=False)) \
+            if s.use_pose_check else None
         smoother = PoseSmoother(s.smooth_poses) if s.smooth_poses > 0 else None
         updater = updater or make_method(s.method, reference, self.updater_config)
         return RobotPipeline(updater, pose_check=check, smoother=smoother)

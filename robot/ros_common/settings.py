@@ -14,13 +14,13 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from gridmap import MapUpdatingError
+from gridmap.config import DEFAULT_PROFILE, check_profile
 from gridmap.suggest import did_you_mean
-from localization.confidence import PoseCheckConfig
-from updater import UpdaterConfig
 
 from ..methods import ROBOT_METHODS, check_method
 from ..outputs import check_outputs, map_files, map_inputs
-from ..robot_config import ROBOT_UPDATER_DEFAULTS, SECTIONS, load_robot_config, section_config
+from ..robot_config import (POSE_CHECK_ON, SECTIONS, differences, load_robot_config,
+                            section_config)
 from .scans import MAX_BEAMS
 
 
@@ -52,7 +52,9 @@ class NodeSettings:
     save_path: str = "map_updated.yaml"  # where ~save writes (map_server YAML + PGM)
     tf_timeout: float = 0.2              # [s] a scan waits this long for its transforms
     queue_size: int = 200                # scans waiting to be processed; older ones dropped
-    use_pose_check: bool = False         # as `mapupdate update --pose-check`
+    profile: str = DEFAULT_PROFILE       # the defaults of the configurations (robot, paper)
+    use_pose_check: bool = True          # as `mapupdate update --pose-check` (default: the
+                                         # profile's)
     smooth_poses: float = 2.0            # [s] as `mapupdate update --smooth-poses`; 0: off
     method: str = "paper"                # as `mapupdate update --method`: paper, fuse, hybrid
     store: str = ""                      # a map store (SQLite file or postgresql:// URL); "": none
@@ -92,6 +94,7 @@ class NodeSettings:
             if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
                 raise NodeSettingsError(f"parameter '~{name}' must be a whole number in "
                                         f"[{low}, {high}], got {v!r}")
+        check_profile(self.profile, NodeSettingsError, "parameter '~profile'")
         if not isinstance(self.use_pose_check, bool):
             raise NodeSettingsError(f"parameter '~use_pose_check' must be true or false, got "
                                     f"{self.use_pose_check!r}")
@@ -147,18 +150,21 @@ def node_settings(params: dict, base=None, kind: type = NodeSettings):
         if key not in own and key not in SECTIONS:
             raise NodeSettingsError(f"unknown parameter '~{key}'"
                                     f"{did_you_mean(key, own + list(SECTIONS))}")
-    given = load_robot_config(base).to_dict()
+    file = load_robot_config(base)
+    profile = params.get("profile", file.profile)
+    check_profile(profile, NodeSettingsError, "parameter '~profile'")
     configs = {}
-    for name, default in (("updater", UpdaterConfig(**ROBOT_UPDATER_DEFAULTS)),
-                          ("pose_check", PoseCheckConfig())):
-        merged = given.get(name, default.to_dict())
+    for name in ("updater", "pose_check"):
         extra = params.get(name, {})
         if not isinstance(extra, dict):
             raise NodeSettingsError(f"parameter '~{name}' must be a mapping of keys, got "
                                     f"{extra!r}")
-        configs[name] = section_config(name, {**merged, **extra}, "node parameters",
-                                       where=f"'~{name}'")
+        # the profile's, the file's keys over it, the parameters' over those
+        configs[name] = section_config(name, {**file.given.get(name, {}), **extra},
+                                       "node parameters", where=f"'~{name}'", profile=profile)
     mine = {k: v for k, v in params.items() if k in own}
+    mine["profile"] = profile
+    mine.setdefault("use_pose_check", POSE_CHECK_ON[profile][0])
     if isinstance(mine.get("scan_topics"), (str, list)):
         topics = mine["scan_topics"]
         # a topic named twice is one subscription, not every scan taken twice
@@ -195,3 +201,14 @@ def refuse_saving_over_the_map(save_path: str, map_path) -> None:
     would overwrite the map the node started from. Refused at start."""
     if map_path is not None:
         check_outputs({"--map": map_inputs(map_path)}, {"~save_path": map_files(save_path)})
+
+
+def profile_line(settings: NodeSettings, updater_config, pose_check_config) -> str:
+    """What the node's startup log says of its configuration: the profile and every key that
+    differs from it."""
+    over = differences(settings.profile, updater_config, None, pose_check_config)
+    if settings.use_pose_check != POSE_CHECK_ON[settings.profile][0]:
+        over.insert(0, f"use_pose_check: {settings.use_pose_check} (profile "
+                       f"{settings.profile}: {POSE_CHECK_ON[settings.profile][0]})")
+    return (f"profile {settings.profile}, pose check {'on' if settings.use_pose_check else 'off'}"
+            + (f"; over the profile: {'; '.join(over)}" if over else "; as the profile has it"))

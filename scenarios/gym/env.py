@@ -19,6 +19,8 @@ from robot.methods import check_method
 from robot.robot_config import ConfigError, load_robot_config
 
 from ..catalog import find_scenario
+from ..options import RunOptions
+from ..runner import resolve_profile
 from ..session import UpdateSession, session_seeds
 from ..topview import scan_points, top_view
 from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
@@ -111,8 +113,12 @@ class WarehouseMapUpdateEnv(gym.Env):
       optional; keys the fields of ``UpdaterConfig``, ``LocalizerConfig``,
       ``PoseCheckConfig``), a YAML path or a ``scenarios.robot_config.RobotConfig``. An unknown
       section or key is refused (``ConfigError``) with the nearest valid name.
+    * ``profile``: the defaults the configuration starts from, ``"robot"`` (default, what a
+      robot should run) or ``"paper"`` (the paper and its authors' code), as ``mapupdate run
+      --profile``; ``config``'s keys are laid over it key by key.
     * ``updater_config``, ``localizer_config``: as for the runner (not beside the same section
-      of ``config``); ``pose_check`` (on): whether the pose check runs.
+      of ``config``); ``pose_check`` (None: the profile's, on for robot): whether the pose
+      check runs.
     * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2),
       a whole number >= 1 that keeps the picture within 4096 px a side (``MAX_RENDER_SIDE``).
 
@@ -144,14 +150,14 @@ class WarehouseMapUpdateEnv(gym.Env):
                  map_seed: int | None = None, control_period: float | None = None,
                  map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
                  waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
-                 updater_config=None, localizer_config=None, pose_check: bool = True,
-                 config=None, render_mode: str | None = None, render_scale: int = 2,
-                 method: str = "paper"):
+                 updater_config=None, localizer_config=None, pose_check: bool | None = None,
+                 config=None, profile: str | None = None, render_mode: str | None = None,
+                 render_scale: int = 2, method: str = "paper"):
         _check_arguments(control_period=control_period, map_seed=map_seed,
                          render_mode=render_mode, render_modes=self.metadata["render_modes"],
                          render_scale=render_scale, lost_distance=lost_distance,
                          waypoint_tolerance=waypoint_tolerance, goal_tolerance=goal_tolerance)
-        robot = load_robot_config(config, source="config")
+        robot = load_robot_config(config, source="config", profile=profile)
         self.method = check_method(method, "method")
         self.scenario = _load_scenario(scenario, quick)
         self.session_index = self.scenario.session_index(session)
@@ -178,9 +184,14 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.lost_distance = float(lost_distance)
         self.waypoint_tolerance, self.goal_tolerance = float(waypoint_tolerance), \
             float(goal_tolerance)
-        self._updater_config = _given_once("updater", updater_config, robot.updater)
-        self._localizer_config = _given_once("localizer", localizer_config, robot.localizer)
-        self._pose_check, self._pose_check_config = bool(pose_check), robot.pose_check
+        # as the runner has them: the profile's, the keys given over it
+        keys = robot.given
+        self._options = resolve_profile(self.scenario, RunOptions(
+            profile=robot.profile,
+            updater_config=_given_once("updater", updater_config,
+                                       robot.updater if "updater" in keys else None),
+            localizer_config=_given_once("localizer", localizer_config, keys.get("localizer")),
+            pose_check=pose_check, pose_check_config=robot.pose_check))
         self._route = np.asarray(self.scenario.sessions[self.session_index].route, np.float64)
         self.action_space, self.observation_space = self._spaces()
         self.world = None
@@ -222,9 +233,10 @@ class WarehouseMapUpdateEnv(gym.Env):
         seeds = session_seeds(episode_seed, len(scn.sessions))
         self.world = sim.World(scn, i, seeds[i]["world"])
         self.session = UpdateSession(scn, i, self.world, reference, initial,
-                                     seeds[i]["localizer"], self._updater_config,
-                                     self._localizer_config, pose_check=self._pose_check,
-                                     pose_check_config=self._pose_check_config,
+                                     seeds[i]["localizer"], self._options.updater_config,
+                                     self._options.localizer_config,
+                                     pose_check=self._options.pose_check,
+                                     pose_check_config=self._options.pose_check_config,
                                      method=self.method)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]

@@ -150,12 +150,13 @@ def injected_poses(true: np.ndarray, error: Error) -> np.ndarray:
 
 
 def replay(rec: Recording, poses: np.ndarray, guard=None, config=None) -> Damage:
-    """Feed the recorded scans to a fresh updater on M1 at ``poses``; score the output."""
+    """Feed the recorded scans to a fresh updater on M1 at ``poses``; score the output.
+    ``config``: the updater's configuration (None: the paper profile's)."""
     import evaluation as ev
     from robot.pipeline import RobotPipeline
     from updater import MapUpdater
 
-    upd = MapUpdater(rec.reference, config)
+    upd = MapUpdater(rec.reference, config, profile="paper")
     pipeline = RobotPipeline(upd, pose_check=guard)
     for k, scan in enumerate(rec.scans):
         pipeline.step(scan, rec.mount, odometry=Pose2D(*rec.odom[k]), pose=Pose2D(*poses[k]))
@@ -214,10 +215,11 @@ def level_size(level: str) -> tuple[float, float]:
 
 
 def run_table(rec: Recording, levels: dict[str, list[Error]], guard_config=None,
-              progress: bool = True, before: bool = False
+              progress: bool = True, before: bool = False, config=None
               ) -> list[tuple[str, int, Damage, Damage]]:
     """(level, variants, damage without the pose check, damage with it) per level;
-    ``before``: the pose check's frozen copy (``benchmarks/pose_check_before``)."""
+    ``before``: the pose check's frozen copy (``benchmarks/pose_check_before``); ``config``:
+    the updater's (None: the paper profile's)."""
     if before:
         from benchmarks.pose_check_before import PoseCheck
     else:
@@ -229,8 +231,8 @@ def run_table(rec: Recording, levels: dict[str, list[Error]], guard_config=None,
         plain, guarded = Damage(), Damage()
         for e in errors:
             poses = injected_poses(rec.true, e)
-            plain.add(replay(rec, poses))
-            guarded.add(replay(rec, poses, guard))
+            plain.add(replay(rec, poses, config=config))
+            guarded.add(replay(rec, poses, guard, config))
         rows.append((name, len(errors), plain, guarded))
         if progress:
             print(f"  {name}: {plain.freed} / {guarded.freed}", file=sys.stderr, flush=True)
@@ -255,12 +257,19 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="30 m of the route")
     ap.add_argument("--before", action="store_true",
                     help="the pose check as it was before its grid kernels")
+    ap.add_argument("--profile", default="paper", choices=("paper", "robot"),
+                    help="the updater's and the pose check's configuration (default paper)")
     args = ap.parse_args(argv)
+    from localization.confidence import PoseCheckConfig
+    from updater import UpdaterConfig
     t0 = time.perf_counter()
     rec = record(args.session, args.quick)
     print(f"{args.session}: {len(rec.scans)} scans recorded in "
           f"{time.perf_counter() - t0:.1f} s", file=sys.stderr)
-    rows = run_table(rec, error_levels(), before=args.before)
+    # the offsets are laid on poses given from outside, as a log's are
+    rows = run_table(rec, error_levels(),
+                     PoseCheckConfig.profile(args.profile).for_poses(own_localizer=False),
+                     before=args.before, config=UpdaterConfig.profile(args.profile))
     print_table(rows, rows[0][2].processed)
     print(f"\nWall time {time.perf_counter() - t0:.0f} s.")
     freed = [name for name, _, _, g in rows if detectable(name) and g.freed]

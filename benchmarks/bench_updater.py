@@ -362,7 +362,6 @@ def log_calls(path: Path, parts: int, tmp: Path):
     from gridmap.mapping import build_map
     from robot.logmap import _placed_scans, map_frame
     from robot.replay import LogSource, Outputs, update_from_log
-    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     from robotlogs import log_observations
 
     found = log_observations(path)
@@ -385,7 +384,7 @@ def log_calls(path: Path, parts: int, tmp: Path):
     finally:
         MapUpdater.process = plain_process
     # update's rules as the code kept from before can run them
-    return first, UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS, **AS_BEFORE}), calls
+    return first, UpdaterConfig.profile("robot", {**AS_BEFORE}), calls
 
 
 def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, dict]]:
@@ -493,11 +492,9 @@ def other_configs() -> dict:
     """mapupdate update's defaults, and their rule for cells observed a few times alone (its
     flag counts, without the hit buffers of the growth into the unknown), every scan processed
     as in the rows of the table."""
-    from robot.robot_config import ROBOT_UPDATER_DEFAULTS
     return {"the paper's with unanimous_min": UpdaterConfig(
-                gating=False, unanimous_min=ROBOT_UPDATER_DEFAULTS["unanimous_min"]),
-            "mapupdate update's defaults": UpdaterConfig(**{**ROBOT_UPDATER_DEFAULTS,
-                                                            "gating": False})}
+                gating=False, unanimous_min=UpdaterConfig.profile("robot").unanimous_min),
+            "mapupdate update's defaults": UpdaterConfig.profile("robot", {"gating": False})}
 
 
 def main() -> int:

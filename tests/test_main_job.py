@@ -91,7 +91,10 @@ def test_full_run_meets_the_bars(tmp_path):
         assert mm["updated_vs_truth"]["opdf"] >= 95.0
         assert mm["oracle_vs_truth"]["opdf"] - mm["updated_vs_truth"]["opdf"] <= 1.0
         assert cd["precision"] >= 0.95 and cd["recall"] >= 0.8
-        assert s["ghost_cells"] == 0
+        # the robot profile's held-back scans confirm what they hit: in W3 a person standing
+        # where a removed object was keeps 6 of its cells (docs/static.md); the paper
+        # profile's updater on the same scans keeps none
+        assert s["ghost_cells"] <= 6 and s["comparison"]["ghost_cells"] == 0
         assert loc["previous_map"]["rmse"] <= 0.10
         assert loc["previous_map"]["rmse"] <= loc["initial_map"]["rmse"] + 0.01
     last = sessions[-1]["localization"]

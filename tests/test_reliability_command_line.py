@@ -333,7 +333,8 @@ def update_with(room, state: Path, out: Path) -> list:
 def test_the_updater_s_own_buffers_hold_no_flag_beyond_their_count(state):
     counts, flags = state["hist"] >> 10, state["hist"] & 0x3FF
     assert np.count_nonzero(flags >> np.minimum(counts, 10)) == 0
-    assert np.count_nonzero(flags) > 50 and counts.max() == 63    # flags kept, counts saturated
+    # flags kept, and counts on both sides of N_b = 10
+    assert np.count_nonzero(flags) > 50 and counts.min() < 10 < counts.max()
 
 
 def test_a_state_with_bits_set_beyond_n_b_is_refused_as_damaged(room, state, tmp_path, capsys):

@@ -221,7 +221,9 @@ def test_run_gives_the_sessions_the_configured_components(configured_run):
     assert updater.threshold == 9 and updater == UpdaterConfig.profile("robot", {"threshold": 9})
     assert localizer.max_particles == 900 and localizer.alpha1 == 0.05
     assert localizer.update_min_d == 0.1            # the robot profile's, under the keys
-    assert pose_check == PoseCheckConfig.profile("robot", {"slack_cells": 1, "max_gain": 0.02})
+    # as the check places the project's own localiser's scans
+    assert pose_check == PoseCheckConfig.profile(
+        "robot", {"slack_cells": 1, "max_gain": 0.02}).for_poses(own_localizer=True)
     recorded = json.loads((out / "state" / "run.json").read_text())
     assert recorded["updater_config"]["threshold"] == 9
 
@@ -261,7 +263,7 @@ def test_the_gym_env_takes_the_config_as_a_dict(room_and_map):
     assert env.session.updater.config == UpdaterConfig.profile("robot", {"threshold": 9})
     assert env.session.localizer.config.max_particles == 900
     assert env.session.pipeline.pose_check.config == PoseCheckConfig.profile(
-        "robot", {"slack_cells": 1, "max_gain": 0.02})
+        "robot", {"slack_cells": 1, "max_gain": 0.02}).for_poses(own_localizer=True)
     env = WarehouseMapUpdateEnv(room, "W2", reference_map=reference, config=VALID,
                                 profile="paper")
     env.reset(seed=3)

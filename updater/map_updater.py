@@ -171,6 +171,8 @@ class MapUpdater:
         self._n_changed = 0
         # with gate_confirm_once: the view (processed scans, mod 255) each occupied cell of M
         # was last confirmed in, so that the scans held back between two views confirm it once
+        # (not saved: after a load, the scans held back before the next view may confirm a
+        # cell once more)
         once = config.gate_confirm and config.gate_confirm_once
         self._confirmed = np.full(self._ref.size if once else 0, 255, np.uint8)
         self._view = 0

@@ -9,6 +9,7 @@ from .map_updater import MapUpdater
 # Rules of the live updater that came after this copy, set as this copy runs them: the run
 # filter by width, the spread of freed objects, the neighbour support by M's value.
 AS_BEFORE = {"min_run_width": 0.0, "spread_removed": False, "support_exact_state": False,
-             "removed_skip_across": False, "free_with_neighbours": False}
+             "removed_skip_across": False, "free_with_neighbours": False,
+             "gate_confirm_once": False}
 
 __all__ = ["AS_BEFORE", "MapUpdater"]

@@ -240,9 +240,11 @@ class PeakMemory:
         return pages * resource.getpagesize() / 2**20
 
 
-def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = True,
-             updater_config=None, method: str = "paper") -> list[SessionRow]:
-    """Play W1 then every update session, chaining the maps; one row per update session."""
+def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | None = None,
+             updater_config=None, method: str = "paper", profile: str = "robot"
+             ) -> list[SessionRow]:
+    """Play W1 then every update session, chaining the maps; one row per update session.
+    ``pose_check``: None for the profile's."""
     from gridmap import FREE, OCCUPIED
     import evaluation as ev
     from scenarios import runner
@@ -253,8 +255,9 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool = Tr
     previous = m1
     last_targets = np.zeros(m1.shape, bool)
     last_truth = None
-    options = runner.RunOptions(progress=False, pose_check=pose_check,
-                                updater_config=updater_config, method=method)
+    options = runner.RunOptions(progress=False, pose_check=pose_check, profile=profile,
+                                updater_config=updater_config, method=method,
+                                compare_paper=False)
     rows = []
     for i in range(1, len(scn.sessions)):
         t0 = time.perf_counter()

@@ -22,7 +22,7 @@ import numpy as np
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, PoseVerdict, Scan
 from updater import MapUpdater, ScanReport, ScanStatus, UpdaterConfig
-from updater.gating import Gate
+from updater.gating import CONFIRMING, Gate
 
 MERGE_RULES = ("vote", "union")
 # [m] beyond a robot's radius, how far from another robot's latest pose a return is taken for
@@ -94,16 +94,14 @@ class SharedGate:
     the rules of ``config``), then the shared updater. A ``updater.MapMethod``, so the robot's
     ``RobotPipeline`` drives it as it drives an updater of its own.
 
-    The updater's ``gate_confirm`` (a scan held back as a view already taken still confirms
-    M's surfaces) runs inside ``MapUpdater.process`` and has no public call; it is refused
-    here rather than silently dropped. A public ``MapUpdater.confirm(scan, sensor_pose)``
-    would let this class carry it."""
+    With ``gate_confirm``, a scan this robot's gate holds back as a view already taken
+    still confirms M's surfaces in the shared updater (``MapUpdater.confirm``)."""
 
     def __init__(self, shared: MapUpdater, config: UpdaterConfig | None = None):
         config = UpdaterConfig() if config is None else config
-        if config.gate_confirm:
-            raise ValueError("gate_confirm is not available in the shared mode: the shared "
-                             "updater has no public call for a confirming scan")
+        if config.gate_confirm and not shared.config.gate_confirm:
+            raise ValueError("gate_confirm needs a shared updater made with it "
+                             "(shared_updater(reference, config))")
         if shared.config.gating:
             raise ValueError("the shared updater's own gate must be off (shared_updater())")
         self.shared, self.config = shared, config
@@ -122,7 +120,9 @@ class SharedGate:
                                       math.degrees(scan.fov()))
             if reason:
                 self.stats["gated"] += 1
-                return ScanReport(t, ScanStatus.GATED, reason,
+                n_un = self.shared.confirm(scan, sensor_pose) \
+                    if self.config.gate_confirm and reason in CONFIRMING else 0
+                return ScanReport(t, ScanStatus.GATED, reason, unchanged_flags=n_un,
                                   changed_cells=self.shared.n_changed, sensor_pose=sensor_pose)
         report = self.shared.process(scan, sensor_pose, odometry, pose_check)
         if self.config.gating and report.status is ScanStatus.PROCESSED:

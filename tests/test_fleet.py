@@ -155,7 +155,7 @@ def test_each_robot_has_its_own_gate_in_front_of_the_shared_updater():
     ref = grid(np.pad(np.zeros((76, 76), np.int8), 2, constant_values=100).tolist())
     shared = shared_updater(ref)
     gates = [SharedGate(shared), SharedGate(shared)]
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="gate_confirm needs a shared updater made with it"):
         SharedGate(shared, UpdaterConfig(gate_confirm=True))
     from robot.pipeline import warm_up
 
@@ -172,6 +172,28 @@ def test_each_robot_has_its_own_gate_in_front_of_the_shared_updater():
     assert statuses[0].count(ScanStatus.PROCESSED) >= 2        # the other still gets through
     assert shared.stats["processed"] == sum(s.count(ScanStatus.PROCESSED)
                                             for s in statuses.values())
+
+
+def test_a_robot_held_back_confirms_the_map_in_the_shared_updater():
+    """With gate_confirm (the robot profile's), a robot standing still gives its first held-back
+    scan's unchanged flags to the shared updater, once until a new view, and no change."""
+    from robot.pipeline import warm_up
+
+    ref = grid(np.pad(np.zeros((76, 76), np.int8), 2, constant_values=100).tolist())
+    config = UpdaterConfig.profile("robot")
+    shared = shared_updater(ref, config)
+    gate = SharedGate(shared, config)
+    scans = []
+    warm_up(lambda g: _Recorder(scans))
+    reports = [gate.process(scan, pose, odometry=scans[0][1]) for scan, pose in scans]
+    assert reports[0].status is ScanStatus.PROCESSED
+    held = reports[1:]
+    assert all(r.status is ScanStatus.GATED and r.changed_flags == 0 for r in held)
+    # (the scans themselves were taken 0.1 m apart: the later ones hit a few cells the first
+    # did not)
+    assert held[0].unchanged_flags > 100
+    assert all(r.unchanged_flags < 0.2 * held[0].unchanged_flags for r in held[1:]), \
+        [r.unchanged_flags for r in held]
 
 
 class _Recorder:

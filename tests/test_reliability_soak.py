@@ -62,7 +62,11 @@ def test_memory_time_and_scores_stay_level(short_soak):
     # (numba's cache cold, or kernels the set-up's warm-up does not reach)
     wall = np.array([r.wall_s for r in rows])
     assert wall[1:].max() < 2 * np.median(wall[1:])
-    assert [round(r.precision, 3) for r in rows] == [0.829, 0.967, 0.964, 0.875]
-    assert [round(r.recall, 3) for r in rows] == [0.396, 0.799, 0.730, 0.434]
-    assert [r.targets for r in rows] == [106, 358, 315, 235]
-    assert all(r.updater_state_mb < 2.0 for r in rows)
+    # the robot profile's figures (the paper profile's, with no pose check: precision
+    # 0.843-0.958, recall 0.334-0.755)
+    assert [round(r.precision, 3) for r in rows] == [0.98, 0.974, 0.986, 0.992]
+    assert [round(r.recall, 3) for r in rows] == [0.861, 0.712, 0.737, 0.321]
+    assert [r.targets for r in rows] == [180, 483, 475, 290]
+    # the robot profile keeps hit buffers for the growth into the unknown
+    # besides the flag buffers: 2.15-2.20 MB (the paper profile's 1.74-1.78)
+    assert all(r.updater_state_mb < 2.5 for r in rows)

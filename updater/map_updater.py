@@ -169,13 +169,12 @@ class MapUpdater:
             max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
         self._n_changed = 0
-        # with gate_confirm_once: the view (processed scans, mod 255) each occupied cell of M
-        # was last confirmed in, so that the scans held back between two views confirm it once
+        # with gate_confirm_once: the cells held-back scans confirmed since the last processed
+        # scan (sorted), so that the scans held back between two views confirm a cell once
         # (not saved: after a load, the scans held back before the next view may confirm a
         # cell once more)
-        once = config.gate_confirm and config.gate_confirm_once
-        self._confirmed = np.full(self._ref.size if once else 0, 255, np.uint8)
-        self._view = 0
+        self._once = config.gate_confirm and config.gate_confirm_once
+        self._confirmed = np.zeros(0, np.int32)
         self._gate = Gate(config)
         self._counts = {"scans": 0, "processed": 0, "gated": 0, "lost": 0, "skipped": 0}
         self._ws = steps.Workspace()
@@ -225,11 +224,20 @@ class MapUpdater:
         n_ch, n_new, n_un, d_changed, d_drawn = flags
         self._n_changed += d_changed
         self._n_drawn += d_drawn
+        if self._confirmed.size:
+            self._confirmed = np.zeros(0, np.int32)      # a new view
         if cfg.gating:
             self._gate.mark_processed(t, gate_pose)
-            self._view = (self._view + 1) % 255
         return ScanReport(t, ScanStatus.PROCESSED, "", n_valid, kept, raw, n_ch, n_new, n_un,
                           self._n_changed + self._n_drawn, ws.verdict.copy(), placed)
+
+    def confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
+        """What a scan held back as a view already taken gives with ``gate_confirm``, for a
+        gate kept outside this updater (a fleet's robots in front of one shared updater):
+        the unchanged flags of the occupied cells of M it hits (``_confirm``). Returns their
+        count."""
+        self._check_input(scan, sensor_pose, None)
+        return self._confirm(scan, sensor_pose)
 
     def _confirm(self, scan: Scan, sensor_pose: Pose2D) -> int:
         """With ``gate_confirm``: the unchanged flags of the occupied cells of M that a scan the
@@ -251,8 +259,9 @@ class MapUpdater:
             return 0
         n_un = steps.flag_unchanged_surfaces(ref, beams, self._un_marks, ws)
         n_un = steps.flag_hit_surfaces(ref, beams, cfg, self._un_marks, ws, n_un)
-        if self._confirmed.size:
-            n_un = steps.once_per_view(ws, n_un, self._confirmed, self._view, self._un_marks)
+        if self._once:
+            n_un, self._confirmed = steps.once_per_view(ws, n_un, self._confirmed,
+                                                        self._un_marks)
         self._push_and_decide(0, n_un)
         return n_un
 
@@ -404,7 +413,8 @@ class MapUpdater:
     def state_bytes(self) -> int:
         """Bytes of every array the updater holds, the per-scan workspace included."""
         arrays = (self._ref, self._clear, self._hist, self._seen, self._decided,
-                  self._ch_marks, self._un_marks, self._enclosed, self._drawn, self._hit_marks)
+                  self._ch_marks, self._un_marks, self._enclosed, self._drawn, self._hit_marks,
+                  self._confirmed)
         return sum(a.nbytes for a in arrays) + self._hits.nbytes + self._ws.nbytes()
 
     # --- stop and resume ----------------------------------------------------------------------

@@ -682,21 +682,20 @@ def decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,
                             shift=count_shift(cfg))
 
 
-def once_per_view(ws: Workspace, n: int, confirmed: np.ndarray, view: int,
-                  marks: np.ndarray) -> int:
-    """The first n of ``ws.unchanged`` without the cells ``confirmed`` (flat, a view number
-    per cell) already has at ``view``, whose marks are cleared as the push would; the others
-    get ``view``. Returns the count kept."""
+def once_per_view(ws: Workspace, n: int, confirmed: np.ndarray, marks: np.ndarray
+                  ) -> tuple[int, np.ndarray]:
+    """The first n of ``ws.unchanged`` without the cells of ``confirmed`` (sorted: the cells
+    confirmed since the last view), whose marks are cleared as the push would: (the count
+    kept, ``confirmed`` with the kept cells added)."""
     cells = ws.unchanged[:n]
-    again = confirmed[cells] == view
+    again = np.isin(cells, confirmed, assume_unique=False)
     if again.any():
         dropped = cells[again]
         np.bitwise_and.at(marks, dropped >> 3,
                           (~np.left_shift(1, dropped & 7)).astype(np.uint8))
         cells = cells[~again]
         ws.unchanged[:cells.size] = cells
-    confirmed[cells] = view
-    return int(cells.size)
+    return int(cells.size), np.union1d(confirmed, cells).astype(np.int32)
 
 
 def push_and_decide(hist_flat: np.ndarray, seen_flat: np.ndarray, ref_flat: np.ndarray,

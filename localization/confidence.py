@@ -93,7 +93,7 @@ ROBOT_PROFILE = {
                                "placed where they fit best, wore a rack's face: 2 cells in "
                                "2 of 192 generated cases) ..."),
     "refined_min_correction_deg": (1.5, "... : a recording's poses keep the looser bounds "
-                                   "(0.1 m refused a fifth of Acapulco's partly mapped scans)"),
+                                   "(0.1 m refused a third more of Acapulco's partly mapped scans)"),
     "known_ends_only": (True, "in a partly mapped place the beams into the unmapped part "
                         "tilted the fit: Acapulco's update refused 380 of 474 scans"),
 }

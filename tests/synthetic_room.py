@@ -169,3 +169,19 @@ def dilate(mask: np.ndarray, cells: int) -> np.ndarray:
         grown[:, :-1] |= grown[:, 1:].copy()
         out = grown
     return out
+
+
+def carmen_log(path, poses, stamps):
+    """A CARMEN log at ``path``: ROBOTLASER1 lines (270 deg, 1 deg apart) cast on the room's
+    walls alone, at ``poses`` (laser pose = odometry pose) and ``stamps``."""
+    walls = room_walls()
+    lines = []
+    for pose, t in zip(poses, stamps):
+        scan = partial_scan(walls, pose, 0.0, fov_deg=270.0, beams=271)
+        r = " ".join(f"{v:.3f}" for v in np.minimum(scan.ranges, 81.83))
+        p = f"{pose.x:.6f} {pose.y:.6f} {pose.theta:.6f}"
+        lines.append(f"ROBOTLASER1 0 {-math.radians(135):.6f} {math.radians(270):.6f} "
+                     f"{math.radians(1):.8f} 81.83 0.01 0 271 {r} 0 {p} {p} 0 0 0 0 0 "
+                     f"{t:.3f} h 0")
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -5,7 +5,6 @@ said. The profiles' table in the docs is the code's."""
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -69,27 +68,12 @@ def test_a_one_key_file_keeps_every_other_key_of_the_profile():
 
 
 # --- update: the same map with a key at its profile's value -----------------------------------
-def carmen_log(path, poses, stamps):
-    """ROBOTLASER1 lines (270 deg, 1 deg apart) in the room without the box."""
-    walls = world.room_walls()
-    lines = []
-    for pose, t in zip(poses, stamps):
-        scan = world.partial_scan(walls, pose, 0.0, fov_deg=270.0, beams=271)
-        r = " ".join(f"{v:.3f}" for v in np.minimum(scan.ranges, 81.83))
-        p = f"{pose.x:.6f} {pose.y:.6f} {pose.theta:.6f}"
-        lines.append(f"ROBOTLASER1 0 {-math.radians(135):.6f} {math.radians(270):.6f} "
-                     f"{math.radians(1):.8f} 81.83 0.01 0 271 {r} 0 {p} {p} 0 0 0 0 0 "
-                     f"{t:.3f} h 0")
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 @pytest.fixture(scope="module")
 def room(tmp_path_factory):
     d = tmp_path_factory.mktemp("profiles")
     save_map(world.rasterise(world.room_walls() + [BOX]), d / "map.yaml")
     poses = [true for true, _, _ in world.Drive(seconds=30.0, rate=10.0).steps()]
-    carmen_log(d / "circle.log", poses, [0.1 * k for k in range(len(poses))])
+    world.carmen_log(d / "circle.log", poses, [0.1 * k for k in range(len(poses))])
     return d
 
 

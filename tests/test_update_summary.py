@@ -38,22 +38,6 @@ def reference():
     return grid.with_data(data)
 
 
-def carmen_log(path, poses, stamps):
-    """ROBOTLASER1 lines (270 deg, 1 deg apart) cast in the room without the box, at ``poses``
-    (laser pose = odometry pose) and ``stamps``."""
-    walls = world.room_walls()
-    lines = []
-    for pose, t in zip(poses, stamps):
-        scan = world.partial_scan(walls, pose, 0.0, fov_deg=270.0, beams=271)
-        r = " ".join(f"{v:.3f}" for v in np.minimum(scan.ranges, 81.83))
-        p = f"{pose.x:.6f} {pose.y:.6f} {pose.theta:.6f}"
-        lines.append(f"ROBOTLASER1 0 {-math.radians(135):.6f} {math.radians(270):.6f} "
-                     f"{math.radians(1):.8f} 81.83 0.01 0 271 {r} 0 {p} {p} 0 0 0 0 0 "
-                     f"{t:.3f} h 0")
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def circle(n=400):
     """The robot circling the box, 5 cm per scan."""
     return [true for true, _, _ in world.Drive(seconds=n / 10, rate=10.0).steps()]
@@ -76,7 +60,7 @@ def room(tmp_path_factory):
 
 # --- the cells changed, by kind -------------------------------------------------------------------
 def test_cells_changed_are_counted_by_kind_as_the_two_maps_differ(room, capsys):
-    log = carmen_log(room / "circle.log", circle(), [0.1 * k for k in range(400)])
+    log = world.carmen_log(room / "circle.log", circle(), [0.1 * k for k in range(400)])
     out = room / "circle.yaml"
     assert main(["update", "--map", str(room / "map.yaml"), "--log", str(log), "--out",
                  str(out), "--no-progress"]) == 0
@@ -116,7 +100,7 @@ def test_cells_changed_are_counted_by_kind_as_the_two_maps_differ(room, capsys):
 def test_method_fuse_or_hybrid_through_the_command_line(room, capsys, method):
     log = room / "circle.log"
     if not log.exists():
-        carmen_log(log, circle(), [0.1 * k for k in range(400)])
+        world.carmen_log(log, circle(), [0.1 * k for k in range(400)])
     out = room / f"{method}.yaml"
     assert main(["update", "--map", str(room / "map.yaml"), "--log", str(log), "--out",
                  str(out), "--method", method, "--no-progress"]) == 0
@@ -187,7 +171,7 @@ def test_the_clock_keeps_increasing_stamps_and_times_the_others_from_scan_order(
 
 def test_a_log_whose_stamps_are_all_equal_is_replayed_from_scan_order_and_says_so(room):
     poses = circle()
-    equal = carmen_log(room / "equal.log", poses, [0.0] * len(poses))
+    equal = world.carmen_log(room / "equal.log", poses, [0.0] * len(poses))
     # the scans at their stamps, as the replay gave them before, to the authors' gate: it
     # never sees time pass, so it lets the first scan through and no other
     _, reports = in_process("paper", equal, UpdaterConfig(grow_into_unknown=True))
@@ -196,7 +180,7 @@ def test_a_log_whose_stamps_are_all_equal_is_replayed_from_scan_order_and_says_s
     assert s["timestamps"] == {"scans": 400, "same_as_before": 399, "earlier_than_before": 0,
                                "period_s": 1.0, "period_measured": False}
     # ... now timed 1 s apart: as the same log with stamps 1 s apart, scan for scan
-    spaced = carmen_log(room / "spaced.log", poses, [float(k) for k in range(len(poses))])
+    spaced = world.carmen_log(room / "spaced.log", poses, [float(k) for k in range(len(poses))])
     t = update_from_log(room / "map.yaml", LogSource(spaced), Outputs(room / "spaced.yaml"))
     assert t["timestamps"]["same_as_before"] == t["timestamps"]["earlier_than_before"] == 0
     assert s["scans_processed"] == t["scans_processed"] > 30
@@ -219,7 +203,7 @@ def test_when_no_cell_changed_the_summary_says_why(room, capsys):
     start = Pose2D(3.5, 5.5, 0.0)
     poses = [start] * 10 + [Pose2D(start.x, start.y, math.radians(10.0 * k)) for k in
                             range(1, 11)]
-    log = carmen_log(room / "still.log", poses, [0.1 * k for k in range(len(poses))])
+    log = world.carmen_log(room / "still.log", poses, [0.1 * k for k in range(len(poses))])
     out = room / "still.yaml"
     assert main(["update", "--map", str(room / "map.yaml"), "--log", str(log), "--out",
                  str(out), "--no-progress"]) == 0
@@ -260,7 +244,7 @@ def test_without_the_unanimous_rule_the_pending_cells_are_counted_not_split(room
     """The paper's own configuration keeps no flag counts (a byte per cell less): the summary
     gives the cells whose evidence stayed below the threshold without saying why."""
     start = Pose2D(3.5, 5.5, 0.0)
-    log = carmen_log(room / "still2.log", [start] * 10, [0.1 * k for k in range(10)])
+    log = world.carmen_log(room / "still2.log", [start] * 10, [0.1 * k for k in range(10)])
     s = update_from_log(room / "map.yaml", LogSource(log), Outputs(room / "still2.yaml"),
                         updater_config=UpdaterConfig(grow_into_unknown=True))
     e = s["evidence"]

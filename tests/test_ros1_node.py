@@ -476,11 +476,21 @@ def test_a_flood_of_large_scans_is_accounted_for_scan_by_scan(ros, bags, tmp_pat
     out = subprocess.run([sys.executable, "-c", FLOOD, str(sent)], env=ros.env, text=True,
                          capture_output=True, timeout=300)
     assert "sent" in out.stdout, out.stderr
-    values = {k: int(v) for k, v in ros.health("flooded", tmp_path / "d.json").items()
-              if k.startswith(("scans_", "skipped"))}
-    skipped = sum(v for k, v in values.items() if k.startswith("skipped"))
-    assert values["scans_received"] == values.get("scans_used", 0) + skipped + \
-        values["scans_dropped_behind"] + values["scans_waiting"]
+
+    def accounted():
+        values = {k: int(v) for k, v in ros.health("flooded", tmp_path / "d.json").items()
+                  if k.startswith(("scans_", "skipped"))}
+        skipped = sum(v for k, v in values.items() if k.startswith("skipped"))
+        return values, values.get("scans_used", 0) + skipped + \
+            values["scans_dropped_behind"] + values["scans_waiting"]
+
+    # a status published while the worker holds a scan (out of the queue, not yet used or
+    # skipped) is one short: the next ones, once it is done, add up
+    for _ in range(5):
+        values, total = accounted()
+        if total == values["scans_received"]:
+            break
+    assert values["scans_received"] == total, values
     assert values["scans_received"] + values["scans_lost_in_transport"] == sent
     ros.stop(node)
 

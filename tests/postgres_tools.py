@@ -10,6 +10,7 @@ from __future__ import annotations
 import glob
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
@@ -21,6 +22,7 @@ class Server:
     def __init__(self, bindir: Path, folder: Path, port: int, runas: list[str]):
         self.bindir, self.folder, self.port, self.runas = bindir, folder, port, runas
         self.count = 0
+        self.options = ""           # the server's command-line options, kept for restart
 
     def url(self, database: str = "postgres") -> str:
         return f"postgresql://postgres@127.0.0.1:{self.port}/{database}"
@@ -33,6 +35,35 @@ class Server:
         with psycopg.connect(self.url(), autocommit=True) as conn:
             conn.execute(f"CREATE DATABASE {name}")
         return self.url(name)
+
+    def _pg_ctl(self, *args: str) -> None:
+        subprocess.run(self.runas + [str(self.bindir / "pg_ctl"), "-D", str(self.folder / "data"),
+                                     *args], check=True, capture_output=True, timeout=90)
+
+    def restart(self, down_for: float = 0.0) -> None:
+        """Stop the server at once (every connection dropped), wait ``down_for`` seconds,
+        start it again on the same port."""
+        self._pg_ctl("-m", "immediate", "stop")
+        time.sleep(down_for)
+        self._pg_ctl("-o", self.options, "-l", str(self.folder / "log"), "-w", "-t", "60",
+                     "start")
+
+    def pids(self) -> list[int]:
+        """The server's processes: the postmaster and its children."""
+        head = (self.folder / "data" / "postmaster.pid").read_text().split()
+        main = int(head[0])
+        out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(main)], capture_output=True,
+                             text=True).stdout.split()
+        return [main] + [int(x) for x in out]
+
+    def pause(self) -> None:
+        """SIGSTOP every process of the server: connections stay open, nothing answers."""
+        for pid in self.pids():
+            os.kill(pid, signal.SIGSTOP)
+
+    def resume(self) -> None:
+        for pid in self.pids():
+            os.kill(pid, signal.SIGCONT)
 
     def stop(self) -> None:
         subprocess.run(self.runas + [str(self.bindir / "pg_ctl"), "-D", str(self.folder / "data"),
@@ -101,6 +132,7 @@ def _start(srv: Server, fsync: bool) -> None:
     options = (f"-p {srv.port} -k {sock} -c listen_addresses=127.0.0.1 "
                f"-c fsync={'on' if fsync else 'off'} -c max_connections=40 "
                "-c shared_buffers=128MB")
+    srv.options = options
     subprocess.run(srv.runas + [str(srv.bindir / "pg_ctl"), "-D", str(data), "-o", options,
                                 "-l", str(srv.folder / "log"), "-w", "-t", "60", "start"],
                    check=True, capture_output=True, timeout=90)

@@ -30,8 +30,19 @@ def unpack_cells(blob: bytes, shape: tuple[int, int]) -> np.ndarray:
 
 
 def digest(data: np.ndarray) -> str:
-    """The cells' fingerprint, checked on every read: a version is whole or refused."""
+    """The cells' fingerprint alone: a store of schema 1's, checked once as it is upgraded."""
     return hashlib.sha256(np.ascontiguousarray(data, dtype=np.int8).tobytes()).hexdigest()
+
+
+def fingerprint(data: np.ndarray, resolution: float, origin: tuple[float, float]) -> str:
+    """A version's fingerprint, checked on every read: its frame (size, resolution, origin, to
+    the last bit) and its cells, so that a version whose frame or cells changed is refused,
+    never served shifted or rescaled."""
+    h = hashlib.sha256()
+    h.update(f"frame {data.shape[0]} {data.shape[1]} {float(resolution).hex()} "
+             f"{float(origin[0]).hex()} {float(origin[1]).hex()}\n".encode())
+    h.update(np.ascontiguousarray(data, dtype=np.int8).tobytes())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)

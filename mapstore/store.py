@@ -1,5 +1,7 @@
 """The map store: one version per commit, each holding its map, the cells it changed against
 its parent and what made it, in an SQLite file or a PostgreSQL database with the same schema.
+A fleet shares one history: a commit whose parent is no longer the latest version is merged
+with what came since (``merge``), and a merge is a version with two parents.
 
 A version is written in one transaction (its row, its map and its changes), so it is whole or
 absent whatever is killed when; writers take the store's write lock first (see
@@ -19,14 +21,16 @@ import zlib
 from dataclasses import dataclass, field
 
 
+import numpy as np
+
 from gridmap import OccupancyGrid
 
-from . import cells
+from . import cells, history, merge
 from .backends import StoreError, connect, database_errors
 
-SCHEMA_VERSION = "1"
+SCHEMA_VERSION = "2"
 TABLES = ("mapstore_info", "mapstore_versions", "mapstore_maps", "mapstore_changes",
-          "mapstore_tags")
+          "mapstore_tags", "mapstore_conflicts")
 # {blob} and {real}: each database's names for bytes and doubles; nothing else differs
 SCHEMA = (
     "CREATE TABLE IF NOT EXISTS mapstore_info (key TEXT PRIMARY KEY, value TEXT NOT NULL)",
@@ -34,7 +38,8 @@ SCHEMA = (
     "parent BIGINT REFERENCES mapstore_versions (version), status TEXT NOT NULL, "
     "created {real} NOT NULL, reviewed {real}, note TEXT, width BIGINT NOT NULL, "
     "height BIGINT NOT NULL, resolution {real} NOT NULL, origin_x {real} NOT NULL, "
-    "origin_y {real} NOT NULL, meta TEXT NOT NULL, counts TEXT NOT NULL)",
+    "origin_y {real} NOT NULL, meta TEXT NOT NULL, counts TEXT NOT NULL, "
+    "merge_parent BIGINT REFERENCES mapstore_versions (version), uid TEXT UNIQUE)",
     "CREATE TABLE IF NOT EXISTS mapstore_maps (version BIGINT PRIMARY KEY REFERENCES "
     "mapstore_versions (version), sha256 TEXT NOT NULL, cells {blob} NOT NULL)",
     "CREATE TABLE IF NOT EXISTS mapstore_changes (version BIGINT PRIMARY KEY REFERENCES "
@@ -42,12 +47,24 @@ SCHEMA = (
     "idx {blob} NOT NULL, vals {blob} NOT NULL)",
     "CREATE TABLE IF NOT EXISTS mapstore_tags (name TEXT PRIMARY KEY, version BIGINT NOT NULL "
     "REFERENCES mapstore_versions (version), created {real} NOT NULL)",
+    "CREATE TABLE IF NOT EXISTS mapstore_conflicts (version BIGINT PRIMARY KEY REFERENCES "
+    "mapstore_versions (version), base BIGINT, cells BIGINT NOT NULL, idx {blob} NOT NULL, "
+    "vals {blob} NOT NULL)",
+)
+# schema 1 to 2: merges (a second parent and their conflicts), commit ids, the frame under the
+# fingerprint
+UPGRADE_1 = (
+    "ALTER TABLE mapstore_versions ADD COLUMN merge_parent BIGINT",
+    "ALTER TABLE mapstore_versions ADD COLUMN uid TEXT",
+    "CREATE UNIQUE INDEX IF NOT EXISTS mapstore_versions_uid ON mapstore_versions (uid)",
+    SCHEMA[-1],
 )
 STATUSES = ("approved", "pending", "rejected")
 TAG_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9._-]{0,63}")
 RESERVED = ("latest", "head")
 VERSION_COLUMNS = ("version, parent, status, created, reviewed, note, width, height, "
-                   "resolution, origin_x, origin_y, meta, counts")
+                   "resolution, origin_x, origin_y, meta, counts, merge_parent, uid")
+UID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
 
 
 @dataclass(frozen=True)
@@ -66,6 +83,8 @@ class Version:
     meta: dict                     # what made it (robot, log, scans, method, ...)
     counts: dict                   # its changes against its parent, by kind
     tags: tuple[str, ...] = field(default=())
+    merge_parent: int | None = None  # a merge's second parent: the version merged in
+    uid: str | None = None         # the committer's id of the commit (a retry finds it)
 
 
 def _one_line_errors(method):
@@ -92,6 +111,8 @@ class Store:
         # (number, map) of the last version read or written: a session's commit compares its
         # map with the parent it has just read, and a map never changes once committed
         self._last: tuple[int, OccupancyGrid] | None = None
+        # the merge the last commit or approval made (its number), None when it made none
+        self.merged: int | None = None
 
     def __enter__(self):
         return self
@@ -126,11 +147,39 @@ class Store:
         if not self.db.has_table("mapstore_info"):
             raise StoreError(f"{self.name}: not a map store (make one with 'mapupdate store "
                              f"init --store ...')")
-        found = self.db.rows("SELECT value FROM mapstore_info WHERE key = 'schema'")
-        if [r[0] for r in found] != [SCHEMA_VERSION]:
+        found = [r[0] for r in
+                 self.db.rows("SELECT value FROM mapstore_info WHERE key = 'schema'")]
+        if found == ["1"]:
+            self._upgrade()
+        elif found != [SCHEMA_VERSION]:
             raise StoreError(f"{self.name}: a map store of another schema "
-                             f"({found[0][0] if found else 'none'}; this one reads "
+                             f"({found[0] if found else 'none'}; this one reads "
                              f"{SCHEMA_VERSION})")
+
+    def _upgrade(self) -> None:
+        """Schema 1 to 2 in one transaction: the new columns and table, and each version's
+        fingerprint taken again with its frame once its cells are checked against the old."""
+        with self.db.write():
+            if self.db.rows("SELECT value FROM mapstore_info WHERE key = 'schema'")[0][0] != "1":
+                return                  # another process upgraded it while this one waited
+            for sql in UPGRADE_1:
+                self.db.run(sql.format(blob=self.db.blob, real=self.db.real))
+            frames = self.db.rows("SELECT version, width, height, resolution, origin_x, "
+                                  "origin_y FROM mapstore_versions")
+            for number, width, height, res, ox, oy in frames:
+                sha, blob = self.db.rows("SELECT sha256, cells FROM mapstore_maps WHERE "
+                                         "version = ?", (number,))[0]
+                try:
+                    data = cells.unpack_cells(blob, (int(height), int(width)))
+                except (ValueError, zlib.error):
+                    data = None
+                if data is None or cells.digest(data) != sha:
+                    raise StoreError(f"{self.name}: the cells of v{number} are damaged (their "
+                                     "fingerprint differs); the store is left at schema 1")
+                self.db.run("UPDATE mapstore_maps SET sha256 = ? WHERE version = ?",
+                            (cells.fingerprint(data, res, (ox, oy)), number))
+            self.db.run("UPDATE mapstore_info SET value = ? WHERE key = 'schema'",
+                        (SCHEMA_VERSION,))
 
     @property
     @_one_line_errors
@@ -147,48 +196,134 @@ class Store:
     # --- writing ---------------------------------------------------------------------------
     @_one_line_errors
     def commit(self, grid: OccupancyGrid, parent: int | None = None, meta: dict | None = None,
-               status: str | None = None) -> int:
-        """Add ``grid`` as a new version whose parent is ``parent`` (None: a first map) and
-        return its number. ``meta``: what made it (JSON). ``status``: None for the store's
-        rule (pending with review on, else approved)."""
+               status: str | None = None, uid: str | None = None) -> int:
+        """Add ``grid`` as a new version whose parent is ``parent`` and return its number.
+
+        ``parent`` None: a first map; into a store that has one already, the map is taken as
+        a child of that first map (the same cells: that version itself, nothing written), so
+        a site keeps one history however many robots start it at once. A parent that is no
+        longer the latest approved version is merged with it (``self.merged``: the merge's
+        number). ``meta``: what made it (JSON). ``status``: None for the store's rule
+        (pending with review on, else approved). ``uid``: the committer's id for this
+        commit; a commit whose uid the store holds already returns that version (a retry
+        after a lost answer writes nothing twice)."""
         if not isinstance(grid, OccupancyGrid):
             raise StoreError(f"{self.name}: a version needs an OccupancyGrid, got "
                              f"{type(grid).__name__}")
         if status is not None and status not in STATUSES:
             raise StoreError(f"{self.name}: unknown status {status!r} ({', '.join(STATUSES)})")
+        if uid is not None and not UID.fullmatch(str(uid)):
+            raise StoreError(f"{self.name}: {uid!r} cannot be a commit id (1-128 letters, "
+                             "digits, '.', '_', ':' or '-')")
         meta_text = _json(self.name, meta or {})
+        self.merged = None
+        if uid is not None and (done := self._by_uid(uid)) is not None:
+            return done
         parent = None if parent is None else self.resolve(parent)
-        # the slow part, packing the cells, is done before the lock is taken
-        before = None if parent is None else self.get(parent)
-        if before is not None and not before.same_frame(grid):
-            raise StoreError(f"{self.name}: the map ({grid.shape[0]} x {grid.shape[1]} at "
-                             f"{grid.resolution} m, origin {grid.origin}) is not in the frame "
-                             f"of its parent v{parent} ({before.shape[0]} x {before.shape[1]} "
-                             f"at {before.resolution} m, origin {before.origin})")
-        packed = _packed(grid, before)
+        # the slow part, reading and packing maps, is done before the lock is taken and done
+        # again under it only when another writer moved the latest version meanwhile
+        plan = self._plan(grid, parent)
         with self.db.write():
             self._at("locked")
+            if uid is not None and (done := self._by_uid(uid)) is not None:
+                return done
+            if (self._root(), self.latest()) != (plan.root, plan.latest):
+                plan = self._plan(grid, parent)
+            if plan.same_as is not None:
+                return plan.same_as
             number = self._next_number()
             if status is None:
                 status = "pending" if self.require_approval else "approved"
-            self._insert(number, parent, status, grid, meta_text, packed)
+            self._insert(number, plan.parent, status, grid, meta_text, plan.packed, uid=uid)
+            if plan.latest is not None and not plan.holds_latest:
+                self.merged = self._merge_into(plan.latest, number, grid, status)
             self._at("written")
         self._at("committed")
         self._last = (number, grid.copy())
+        return number
+
+    def _plan(self, grid: OccupancyGrid, parent: int | None) -> "_Plan":
+        root, latest = self._root(), self.latest()
+        same_as = None
+        if parent is None and root is not None:
+            first = self.get(root)
+            self._check_frame(grid, first, f"the store's first map v{root}")
+            if np.array_equal(first.data, grid.data):
+                same_as = root
+            parent = root
+        before = None if parent is None else self.get(parent)
+        if before is not None:
+            self._check_frame(grid, before, f"its parent v{parent}")
+        graph = self._graph()
+        holds_latest = (latest is None or parent is None
+                        or history.holds(graph, parent, latest))
+        packed = None if same_as is not None else _packed(grid, before)
+        return _Plan(root, latest, parent, same_as, holds_latest, packed)
+
+    def _check_frame(self, grid: OccupancyGrid, other: OccupancyGrid, what: str) -> None:
+        if not other.same_frame(grid):
+            raise StoreError(f"{self.name}: the map ({grid.shape[0]} x {grid.shape[1]} at "
+                             f"{grid.resolution} m, origin {grid.origin}) is not in the frame "
+                             f"of {what} ({other.shape[0]} x {other.shape[1]} "
+                             f"at {other.resolution} m, origin {other.origin})")
+
+    def _merge_into(self, ours: int, theirs: int, theirs_grid: OccupancyGrid,
+                    status: str) -> int:
+        """Write the merge of version ``theirs`` into ``ours`` against their common ancestor
+        as a new version (parents ``ours`` and ``theirs``) and return its number. Under the
+        write lock: ``theirs`` may be a row of this transaction."""
+        graph = self._graph()
+        base = history.common_ancestor(graph, ours, theirs)
+        theirs_wins = (history.newest_session(graph, theirs, base)
+                       >= history.newest_session(graph, ours, base))
+        ours_grid = self.get(ours)
+        base_data = None if base is None else self.get(base).data
+        result = merge.three_way(base_data, ours_grid.data, theirs_grid.data, theirs_wins)
+        merged = OccupancyGrid(result.data, ours_grid.resolution, ours_grid.origin)
+        number = self._next_number()
+        meta = {"method": "merge", "merge_of": [ours, theirs], "base": base,
+                "rule": merge.RULE, "conflicts_to": "theirs" if theirs_wins else "ours",
+                "cells": result.counts, "robot": self._meta_of(theirs).get("robot")}
+        self._insert(number, ours, status, merged, _json(self.name, meta),
+                     _packed(merged, ours_grid), merge_parent=theirs)
+        idx, vals = merge.pack_conflicts(result.conflicts, cells.LEVEL)
+        self.db.run("INSERT INTO mapstore_conflicts VALUES (?, ?, ?, ?, ?)",
+                    (number, base, len(result.conflicts), idx, vals))
+        self._at("merge written")
+        self._last = (number, merged.copy())
         return number
 
     def _next_number(self) -> int:
         return int(self.db.rows("SELECT COALESCE(MAX(version), 0) FROM mapstore_versions")
                    [0][0]) + 1
 
-    def _insert(self, number, parent, status, grid, meta_text, packed) -> None:
+    def _root(self) -> int | None:
+        found = self.db.rows("SELECT MIN(version) FROM mapstore_versions")[0][0]
+        return None if found is None else int(found)
+
+    def _by_uid(self, uid: str) -> int | None:
+        found = self.db.rows("SELECT version FROM mapstore_versions WHERE uid = ?", (uid,))
+        return int(found[0][0]) if found else None
+
+    def _meta_of(self, number: int) -> dict:
+        return json.loads(self.db.rows("SELECT meta FROM mapstore_versions WHERE version = ?",
+                                       (number,))[0][0])
+
+    def _graph(self) -> history.Graph:
+        return {int(n): history.Node(None if p is None else int(p),
+                                     None if m is None else int(m), float(c))
+                for n, p, m, c in self.db.rows("SELECT version, parent, merge_parent, created "
+                                               "FROM mapstore_versions")}
+
+    def _insert(self, number, parent, status, grid, meta_text, packed, merge_parent=None,
+                uid=None) -> None:
         sha, blob, changes = packed
         counts = changes.counts() if changes is not None else {}
         self.db.run(f"INSERT INTO mapstore_versions ({VERSION_COLUMNS}) VALUES "
-                    "(?, ?, ?, ?, NULL, NULL, ?, ?, ?, ?, ?, ?, ?)",
+                    "(?, ?, ?, ?, NULL, NULL, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (number, parent, status, time.time(), grid.width, grid.height,
                      grid.resolution, grid.origin[0], grid.origin[1], meta_text,
-                     json.dumps(counts)))
+                     json.dumps(counts), merge_parent, uid))
         self._at("version row")
         self.db.run("INSERT INTO mapstore_maps VALUES (?, ?, ?)", (number, sha, blob))
         self._at("map row")
@@ -214,6 +349,9 @@ class Store:
 
     @_one_line_errors
     def approve(self, v, note: str | None = None) -> int:
+        """Approve a pending version. One that does not hold the latest approved version's
+        changes (a sibling of it) is merged with it, and the merge, approved, is the latest
+        (``self.merged``: its number)."""
         return self._review(v, "approved", note)
 
     @_one_line_errors
@@ -222,13 +360,20 @@ class Store:
 
     def _review(self, v, status: str, note: str | None) -> int:
         number = self.resolve(v)
+        self.merged = None
         with self.db.write():
             now = self.db.rows("SELECT status FROM mapstore_versions WHERE version = ?",
                                (number,))[0][0]
             if now != "pending":
                 raise StoreError(f"{self.name}: v{number} is {now}, not pending review")
+            latest = self.latest()
             self.db.run("UPDATE mapstore_versions SET status = ?, reviewed = ?, note = ? "
                         "WHERE version = ?", (status, time.time(), note, number))
+            graph = self._graph()
+            if (status == "approved" and latest is not None
+                    and not history.holds(graph, number, latest)
+                    and not history.holds(graph, latest, number)):
+                self.merged = self._merge_into(latest, number, self.get(number), "approved")
         return number
 
     @_one_line_errors
@@ -298,10 +443,11 @@ class Store:
     @staticmethod
     def _version(row, tags) -> Version:
         (number, parent, status, created, reviewed, note, width, height, res, ox, oy, meta,
-         counts) = row
+         counts, merge_parent, uid) = row
         return Version(int(number), None if parent is None else int(parent), status,
                        float(created), reviewed, note, (int(height), int(width)), float(res),
-                       (float(ox), float(oy)), json.loads(meta), json.loads(counts), tags)
+                       (float(ox), float(oy)), json.loads(meta), json.loads(counts), tags,
+                       None if merge_parent is None else int(merge_parent), uid)
 
     @_one_line_errors
     def get(self, v) -> OccupancyGrid:
@@ -316,12 +462,20 @@ class Store:
         except (ValueError, zlib.error) as e:
             raise StoreError(f"{self.name}: the cells of v{info.number} are damaged ({e})"
                              ) from None
-        if cells.digest(data) != sha:
+        if cells.fingerprint(data, info.resolution, info.origin) != sha:
             raise StoreError(f"{self.name}: the cells of v{info.number} are damaged (their "
                              "fingerprint differs)")
         grid = OccupancyGrid(data, info.resolution, info.origin)
         self._last = (info.number, grid.copy())
         return grid
+
+    @_one_line_errors
+    def conflicts(self, v) -> merge.Conflicts | None:
+        """The conflicts a merge settled (None: ``v`` is not a merge)."""
+        number = self.resolve(v)
+        found = self.db.rows("SELECT idx, vals FROM mapstore_conflicts WHERE version = ?",
+                             (number,))
+        return merge.unpack_conflicts(*found[0]) if found else None
 
     @_one_line_errors
     def diff(self, a, b) -> cells.CellChanges:
@@ -343,10 +497,23 @@ class Store:
         return cells.changes_between(ga.data, gb.data)
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What a commit writes, worked out before the write lock is taken."""
+
+    root: int | None            # the store's first version when planned
+    latest: int | None          # its latest approved version when planned
+    parent: int | None
+    same_as: int | None         # a first map equal to the store's: that version, no new one
+    holds_latest: bool          # the parent holds the latest's changes: nothing to merge
+    packed: tuple | None
+
+
 def _packed(grid: OccupancyGrid, before: OccupancyGrid | None):
     """(fingerprint, packed cells, changes against ``before`` or None)."""
     changes = None if before is None else cells.changes_between(before.data, grid.data)
-    return cells.digest(grid.data), cells.pack_cells(grid.data), changes
+    return (cells.fingerprint(grid.data, grid.resolution, grid.origin),
+            cells.pack_cells(grid.data), changes)
 
 
 def _json(name: str, meta: dict) -> str:

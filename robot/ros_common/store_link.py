@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import socket
 import time
+import uuid
 from importlib import metadata
 
 from gridmap import OccupancyGrid
@@ -44,27 +45,35 @@ class StoreLink:
                 "project_version": _project_version()}, status="approved")
             return given
 
-    def commit(self, grid: OccupancyGrid, meta: dict) -> tuple[int, str]:
-        """Commit ``grid`` as a child of the node's version; (its number, its status)."""
+    def commit(self, grid: OccupancyGrid, meta: dict
+               ) -> tuple[int, str, tuple[int, OccupancyGrid] | None]:
+        """Commit ``grid`` as a child of the node's version: (its number, its status, and
+        (number, map) of the merge the store made when the node's version was no longer the
+        latest, else None). Approved, the version (or its merge) is the node's from now."""
         with open_store(self.target) as store:
             number = store.commit(grid, self.version, {
                 "robot": self.robot, "source": "live node", "started_from": self.version,
-                "project_version": _project_version(), **meta})
+                "project_version": _project_version(), **meta}, uid=uuid.uuid4().hex)
             status = store.version(number).status
+            merged = None if store.merged is None else (store.merged, store.get(store.merged))
         if status == "approved":
-            self.version = number
-        return number, status
+            self.version = number if merged is None else merged[0]
+        return number, status, merged
 
     def commit_session(self, pipeline, method: str, updater_config) -> tuple[bool, str, object]:
         """A node's ``commit`` with a store: (done, what to answer, the map the node goes on
-        from: the updated one when approved at once, else its reference, buffers afresh)."""
+        from: the updated one when approved at once, or the merge of it with what other
+        robots committed meanwhile; else its reference, buffers afresh)."""
         updated = pipeline.updater.updated_map()
         meta = {"method": method, "scans": pipeline.counts.as_dict(),
                 "config": {"updater": updater_config.to_dict()}}
         try:
-            number, status = self.commit(updated, meta)
+            number, status, merged = self.commit(updated, meta)
         except StoreError as e:
             return False, f"cannot commit: {e}", None
+        if status == "approved" and merged is not None:
+            return True, (f"committed v{number}, merged with the site's map as v{merged[0]}, "
+                          "the reference now"), merged[1]
         if status == "approved":
             return True, f"committed v{number}, the reference now", updated
         return True, (f"committed v{number}, pending review; the node keeps v{self.version} "

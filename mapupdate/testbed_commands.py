@@ -146,10 +146,11 @@ def fleet(args) -> int:
     from scenarios.fleet import FleetOptions, format_table, run_fleet
     from scenarios.options import RunError
 
-    options = FleetOptions(robots=args.robots, mode=args.mode, merge_rule=args.merge,
+    mode = args.mode or ("store" if args.store else "shared")
+    options = FleetOptions(robots=args.robots, mode=mode, merge_rule=args.merge,
                            quick=args.quick, sessions=args.sessions, seed=args.seed,
                            mask_robots=not args.unmasked, progress=not args.no_progress,
-                           profile=args.profile or DEFAULT_PROFILE)
+                           profile=args.profile or DEFAULT_PROFILE, store=args.store)
     try:
         record = run_fleet(args.scenario, options, args.out)
     except ValueError as e:             # the fleet's own checks name the option

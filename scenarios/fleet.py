@@ -5,7 +5,12 @@ obstacles, and one of two ways to update the map they share (``scenarios.fleet_s
 - ``shared``: one updater fed every robot's scans in scan-time order through a ``ScanQueue``,
   a gate per robot in front of it;
 - ``per-robot``: one updater each, their maps merged at commit (``merge_rule``: ``vote`` or
-  ``union``, see ``merge_maps``).
+  ``union``, see ``merge_maps``);
+- ``store``: one updater each, as robots with the live node: each commits its map to a map
+  store (``FleetOptions.store``: an SQLite file or a PostgreSQL URL) every
+  ``commit_interval`` seconds and at the end of the session, the store merges it with what
+  the others committed meanwhile, and each takes up the site's newer versions every
+  ``poll_interval`` seconds.
 
 A run maps the warehouse in W1 with one robot (as ``mapupdate run`` does) and then plays the
 update sessions with the fleet, each from the last session's map, scoring each session as the
@@ -46,9 +51,14 @@ from .fleet_store import (FleetBoard, RobotMask, ScanQueue, SharedGate, check_me
 from .runner import build_initial_map
 from .session import START_STD, localizer_config_for, map_metrics, session_seeds
 
-MODES = ("shared", "per-robot")
+MODES = ("shared", "per-robot", "store")
 MAX_ROBOTS = 8
 PROBE_INTERVAL = 1.0   # [s] of simulated time between looks at the map, for the latencies
+# [s] of simulated time: a robot of the store mode commits this often and looks for the
+# site's newer versions this often (the live node's store_poll_period is 10 s; a fleet
+# session of the quick routes lasts a minute or two)
+COMMIT_INTERVAL = 30.0
+POLL_INTERVAL = 10.0
 UPLINK_INTERVAL = 1.0  # [s] a robot uploads its scans in batches this far apart
 
 # One-way loops: the transport loop of the built-in warehouse rearranged so that no two legs
@@ -123,6 +133,9 @@ class FleetRobot:
         check = PoseCheck(reference, PoseCheckConfig.profile(profile).for_poses(
             own_localizer=True)) if POSE_CHECK_ON[profile][0] else None
         self.pipeline = RobotPipeline(self.updater, self.localizer, check)
+        self.profile = profile
+        self.version: int | None = None      # the store mode: the version the robot is on
+        self.processed_before = 0             # scans its earlier pipelines processed
         self.views = ev.ObservationCounter(reference) if count_views else None
         self.true: list = []
         self.estimated: list = []
@@ -139,6 +152,17 @@ class FleetRobot:
             self.views.add_scan(report.sensor_pose, msg.scan.ranges.astype(np.float64),
                                 msg.scan.angles())
         return report
+
+    def adopt(self, reference: OccupancyGrid, config: UpdaterConfig) -> None:
+        """Go on from ``reference`` (a version of the store), buffers afresh, as the live
+        node does when it takes up a newer version; the localiser keeps its map."""
+        self.processed_before += self.pipeline.counts.scans_processed
+        updater = MapUpdater(reference, config)
+        self.updater = updater if self.board is None else RobotMask(updater, self.index,
+                                                                    self.board)
+        check = PoseCheck(reference, PoseCheckConfig.profile(self.profile).for_poses(
+            own_localizer=True)) if POSE_CHECK_ON[self.profile][0] else None
+        self.pipeline = RobotPipeline(self.updater, self.localizer, check)
 
     def ape_rmse(self) -> float:
         return ev.ape_statistics(np.asarray(self.estimated), np.asarray(self.true))["rmse"]
@@ -162,6 +186,9 @@ class FleetOptions:
     progress: bool = True
     probe_interval: float = PROBE_INTERVAL
     uplink_interval: float = UPLINK_INTERVAL
+    store: str | None = None            # the store mode's map store (a file or a URL)
+    commit_interval: float = COMMIT_INTERVAL
+    poll_interval: float = POLL_INTERVAL
 
     def check(self) -> None:
         if isinstance(self.robots, bool) or not isinstance(self.robots, int) \
@@ -172,6 +199,10 @@ class FleetOptions:
             raise ValueError(f"unknown mode {self.mode!r} (modes: {', '.join(MODES)})")
         check_merge_rule(self.merge_rule)
         check_profile(self.profile, ValueError, "--profile")
+        if (self.mode == "store") != (self.store is not None):
+            raise ValueError("the store mode needs a store (--store) and a store needs the "
+                             "store mode" if self.mode == "store" else
+                             f"--store goes with the store mode, not --mode {self.mode}")
 
 
 class FleetSession:
@@ -196,10 +227,17 @@ class FleetSession:
                 localizer_seed.entropy, spawn_key=tuple(localizer_seed.spawn_key) + (k,))
             upd = SharedGate(self.shared, cfg) if self.shared else MapUpdater(reference, cfg)
             self.robots.append(FleetRobot(scenario, reference, member.start, seed, upd,
-                                          count_views=self.shared is None
+                                          count_views=options.mode == "per-robot"
                                           and options.merge_rule == "vote",
                                           board=self.board, index=k,
                                           profile=options.profile))
+        self.config = cfg
+        self.site = reference                # the store mode: the site's latest version
+        self.store_counts = {"commits": 0, "merges": 0, "conflicts": 0, "taken": 0}
+        self.store_s = 0.0
+        if options.mode == "store":         # the site's latest version, scored against
+            self._join_store(reference)
+            reference = self.reference = self.site
         self.queue = ScanQueue(len(self.robots))
         self._outbox = [[] for _ in self.robots]
         n = len(self.robots)
@@ -232,11 +270,78 @@ class FleetSession:
         self._outbox[k].clear()
 
     def finish(self) -> None:
-        """The end of the session: every robot's last batch, and the queue emptied."""
+        """The end of the session: every robot's last batch, and the queue emptied; in the
+        store mode every robot commits what it has."""
         for k in range(len(self.robots)):
             self._upload(k)
         self._handle(self.queue.drain())
+        if self.options.mode == "store":
+            for k in range(len(self.robots)):
+                self._commit(k)
         self._probe(math.inf)
+
+    # --- the store mode ------------------------------------------------------------------------
+    def _join_store(self, reference: OccupancyGrid) -> None:
+        """Each robot starts from the store's latest approved version (an empty store takes
+        ``reference`` as its first map, once)."""
+        from mapstore import open_store
+        t0 = time.perf_counter()
+        with open_store(self.options.store, create=True) as store:
+            latest = store.latest()
+            if latest is None:
+                latest = store.commit(reference, None, {"method": "import", "source":
+                                                        "fleet W1", "robot": "robot1"})
+            self.site = store.get(latest)
+        for robot in self.robots:
+            robot.version = latest
+            robot.adopt(self.site, self.config)
+        n = len(self.robots)
+        self._next_commit = [self.options.commit_interval * (1 + k / n) for k in range(n)]
+        self._next_poll = [self.options.poll_interval] * n
+        self.store_s += time.perf_counter() - t0
+
+    def _store_turn(self, k: int, t: float) -> None:
+        if t >= self._next_commit[k]:
+            self._commit(k)
+            self._next_commit[k] += self.options.commit_interval
+        elif t >= self._next_poll[k]:
+            self._poll(k)
+            self._next_poll[k] += self.options.poll_interval
+
+    def _commit(self, k: int) -> None:
+        """Robot ``k`` commits its map on the version it is on; the store merges it with the
+        site's latest when that moved on, and the robot goes on from the result."""
+        from mapstore import open_store
+        robot, t0 = self.robots[k], time.perf_counter()
+        updated = robot.updater.updated_map()
+        if np.array_equal(updated.data, robot.updater.inner.reference_map.data
+                          if self.board is not None else robot.updater.reference_map.data):
+            return self._poll(k)                # nothing new to commit
+        with open_store(self.options.store) as store:
+            number = store.commit(updated, robot.version, {
+                "robot": f"robot{k + 1}", "method": f"fleet, {self.options.profile} profile",
+                "session": self.name, "scans": robot.pipeline.counts.as_dict()})
+            merged = store.merged
+            robot.version = number if merged is None else merged
+            mine = store.get(robot.version)
+            if merged is not None:
+                self.store_counts["merges"] += 1
+                self.store_counts["conflicts"] += len(store.conflicts(merged))
+            self.site = store.get(store.latest())
+        self.store_counts["commits"] += 1
+        robot.adopt(mine, self.config)
+        self.store_s += time.perf_counter() - t0
+
+    def _poll(self, k: int) -> None:
+        from mapstore import open_store
+        robot, t0 = self.robots[k], time.perf_counter()
+        with open_store(self.options.store) as store:
+            latest = store.latest()
+            if latest is not None and latest > robot.version:
+                robot.version = latest
+                robot.adopt(store.get(latest), self.config)
+                self.store_counts["taken"] += 1
+        self.store_s += time.perf_counter() - t0
 
     def _handle(self, ready) -> None:
         t0 = time.process_time()
@@ -245,6 +350,8 @@ class FleetSession:
                 self._probe(t)
             report = self.robots[k].step(msg, self.mounts[msg.lidar])
             self.handled.append((t, k))
+            if self.options.mode == "store":
+                self._store_turn(k, t)
             if report is not None and report.processed:
                 clean = self.world.scan_without_people(msg.true_pose, msg.lidar)
                 self.counter.add_scan(msg.true_pose.compose(self.mounts[msg.lidar]),
@@ -256,6 +363,8 @@ class FleetSession:
         """The fleet's map now: the shared updater's, or the merge of the robots' maps."""
         if self.shared is not None:
             return self.shared.updated_map()
+        if self.options.mode == "store":
+            return self.site
         maps = [r.updater.updated_map() for r in self.robots]
         views = None if self.options.merge_rule == "union" else \
             [r.views.counts for r in self.robots]
@@ -279,10 +388,12 @@ class FleetSession:
         shown = times[np.isfinite(times)]
         duration = self.handled[-1][0] if self.handled else 0.0
         cd = ev.change_detection(self.reference, updated, self.truth, observable)
-        processed = sum(r.pipeline.counts.scans_processed for r in self.robots)
+        processed = sum(r.processed_before + r.pipeline.counts.scans_processed
+                        for r in self.robots)
         row = {
             "session": self.name, "robots": len(self.robots), "mode": self.options.mode,
-            "merge_rule": self.options.merge_rule if self.shared is None else None,
+            "merge_rule": self.options.merge_rule if self.options.mode == "per-robot"
+            else None,
             "precision": cd["precision"], "recall": cd["recall"], "f1": cd["f1"],
             "changes": cd["changes"], "targets": cd["target_cells"],
             "opdf": map_metrics(updated, self.truth)["opdf"],
@@ -298,6 +409,8 @@ class FleetSession:
             "ape_rmse_m": float(np.mean([r.ape_rmse() for r in self.robots])),
             "cpu_s": self.cpu_s, "world_finished": bool(self.world.finished),
         }
+        if self.options.mode == "store":
+            row.update(self.store_counts, store_s=self.store_s)
         return updated, row
 
 
@@ -363,7 +476,9 @@ COLUMNS = (("robots", "N", "{}"), ("mode", "mode", "{}"), ("session", "session",
            ("latency_median_s", "shown, median [s]", "{:.0f}"),
            ("latency_p90_s", "shown, p90 [s]", "{:.0f}"),
            ("committed_at_s", "session [s]", "{:.0f}"),
-           ("scans_processed", "scans used", "{:.0f}"), ("cpu_s", "CPU [s]", "{:.1f}"))
+           ("scans_processed", "scans used", "{:.0f}"), ("cpu_s", "CPU [s]", "{:.1f}"),
+           ("commits", "commits", "{:.0f}"), ("merges", "merges", "{:.0f}"),
+           ("conflicts", "conflicts", "{:.0f}"))
 
 
 def mode_label(row: dict) -> str:
@@ -391,7 +506,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         "each update session."))
     p.add_argument("--scenario", default=None, help="built-in name or scenario file")
     p.add_argument("--robots", type=int, default=2, help=f"1..{MAX_ROBOTS} (default 2)")
-    p.add_argument("--mode", choices=MODES, default="shared")
+    p.add_argument("--mode", choices=MODES, default=None,
+                   help="default shared; store with --store")
+    p.add_argument("--store", default=None, help="the store mode's map store")
     p.add_argument("--merge", choices=("vote", "union"), default="vote",
                    help="merge rule of the per-robot mode (default vote)")
     p.add_argument("--sessions", type=int, default=None, help="W1 and this many minus one")
@@ -406,9 +523,11 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    options = FleetOptions(robots=args.robots, mode=args.mode, merge_rule=args.merge,
+    options = FleetOptions(robots=args.robots, merge_rule=args.merge,
+                           mode=args.mode or ("store" if args.store else "shared"),
                            quick=args.quick, sessions=args.sessions, seed=args.seed,
-                           mask_robots=not args.unmasked, progress=not args.no_progress)
+                           mask_robots=not args.unmasked, progress=not args.no_progress,
+                           store=args.store)
     try:
         record = run_fleet(args.scenario, options, args.out)
     except (ValueError, OSError) as e:

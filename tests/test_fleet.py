@@ -26,9 +26,17 @@ except ImportError:  # pragma: no cover - run from the repository root
 LIDAR = {"mount": [0.2, 0.0, 0.0], "fov_deg": 270, "beams": 271, "range_max": 10.0,
          "range_noise_std": 0.01, "rate_hz": 10}
 BOX = (9.5, 1.2)           # the box removed in W2, in the east room
+CRATE = (3.0, 2.2)         # a crate the store-mode test adds in the west room
 
 
-def two_rooms():
+def near_point(grid, xy, half: int) -> np.ndarray:
+    row, col = grid.world_to_cell(np.array([xy[0]]), np.array([xy[1]]))
+    out = np.zeros(grid.shape, bool)
+    out[int(row[0]) - half:int(row[0]) + half + 1, int(col[0]) - half:int(col[0]) + half + 1] = 1
+    return out
+
+
+def two_rooms(changes=({"remove": "box"},)):
     """Two rooms side by side (12 x 6 m) joined by a door at the north end of the wall between
     them. From the west room's south half the wall hides the east room's south half, where a
     box is removed in W2."""
@@ -39,7 +47,7 @@ def two_rooms():
                   "movable": [{"id": "box", "center": list(BOX), "size": [1.0, 1.0]}]},
         "robot": {"start": [1.0, 1.0, 0.0], "radius": 0.3, "lidars": [LIDAR]},
         "sessions": [{"name": "W1", "mapping": True, "route": [[4.0, 1.0]]},
-                     {"name": "W2", "changes": [{"remove": "box"}], "route": [[4.0, 1.0]],
+                     {"name": "W2", "changes": list(changes), "route": [[4.0, 1.0]],
                       "max_duration": 40.0}]})
 
 
@@ -207,15 +215,16 @@ class _Recorder:
 
 
 # --- a fleet session ------------------------------------------------------------------------------
-def box_session(mode):
-    scn = two_rooms()
+def box_session(mode, store=None, commit_interval=10.0, changes=({"remove": "box"},)):
+    scn = two_rooms(changes)
     reference = sim.World(scn, 0).ground_truth()       # M1: the box still there
     west = FleetMember(scn.robot.start, ((4.0, 1.0), (1.5, 1.0)))
     east = FleetMember(Pose2D(11.0, 3.5, math.pi), ((7.0, 3.5), (7.0, 2.5), (11.0, 2.5)),
                        lidar_phase=0.05)
     seeds = session_seeds(scn.seed, 2)[1]
     world = FleetWorld(scn, 1, [west, east], seeds["world"])
-    options = FleetOptions(robots=2, mode=mode, progress=False,
+    options = FleetOptions(robots=2, mode=mode, progress=False, store=store,
+                           commit_interval=commit_interval, poll_interval=3.0,
                            updater_config=UpdaterConfig(gate_min_distance=0.15))
     fs = FleetSession(scn, 1, world, reference, seeds["localizer"], options)
     for k, msg in world.run():
@@ -242,6 +251,50 @@ def test_the_fleets_map_frees_a_box_only_one_robot_saw(mode):
         assert (east[box] == FREE).mean() > 0.5
 
 
+def replayed_site(store) -> np.ndarray:
+    """The site map the merges promise, computed without them: every robot's own version's
+    changes against the version it started from, applied in commit order on the first map,
+    the last change of a cell winning."""
+    log = store.log()
+    site = store.get(log[0].number).data.copy()
+    for v in log[1:]:
+        if v.merge_parent is None:
+            before, after = store.get(v.parent).data, store.get(v.number).data
+            site[before != after] = after[before != after]
+    return site
+
+
+def test_robots_committing_to_a_store_share_each_others_changes(tmp_path):
+    """The store mode: the east robot frees the box, the west robot never sees it; both commit
+    every 10 s to one store, which merges them, and the west robot takes up the merged
+    versions."""
+    from mapstore import open_store
+
+    path = str(tmp_path / "site.db")
+    fs, box = box_session("store", store=path, commit_interval=4.0, changes=(
+        {"remove": "box"}, {"add": {"id": "crate", "center": list(CRATE), "size": [0.6, 0.6]}}))
+    updated, row = fs.result()
+    assert (updated.data[box] == FREE).mean() > 0.5
+    crate = near_point(updated, CRATE, 6)
+    assert (updated.data[crate] == OCCUPIED).sum() >= 10        # the west robot's crate
+    assert row["commits"] >= 2 and row["merges"] >= 1 and row["precision"] > 0.9, row
+    west = fs.robots[0]
+    with open_store(path) as store:
+        assert np.array_equal(store.get(store.latest()).data, updated.data)
+        assert np.array_equal(replayed_site(store), updated.data)
+        robots = {v.meta.get("robot") for v in store.log() if v.merge_parent is None}
+        assert {"robot1", "robot2"} <= robots
+        # the west robot's own map never freed the box; the version it goes on from has it
+        assert (store.get(west.version).data[box] == FREE).mean() > 0.5
+    assert (west.updater.updated_map().data[box] == FREE).mean() > 0.5
+    east = fs.robots[1]
+    assert (east.updater.updated_map().data[crate] == OCCUPIED).sum() >= 10
+    with pytest.raises(ValueError, match="--store goes with the store mode"):
+        FleetOptions(mode="shared", store=path).check()
+    with pytest.raises(ValueError, match="the store mode needs a store"):
+        FleetOptions(mode="store").check()
+
+
 @pytest.mark.slow
 def test_a_quick_fleet_run_in_the_warehouse(tmp_path):
     record = run_fleet("aws_small_warehouse", FleetOptions(robots=2, quick=True, sessions=2,
@@ -262,6 +315,13 @@ def test_the_command_line_prints_the_table_and_writes_the_run(tmp_path, capsys):
     assert "| 2 | per-robot (vote) | W2 |" in out
     record = json.loads((tmp_path / "run" / "fleet.json").read_text())
     assert record["robots"] == 2 and record["sessions"][0]["world_finished"]
+    assert main(["fleet", "--scenario", str(path), "--robots", "2", "--no-progress",
+                 "--store", str(tmp_path / "site.db")]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if "| store |" in line)
+    commits = int(row.strip("| ").split(" | ")[-3])
+    from mapstore import open_store
+    with open_store(str(tmp_path / "site.db")) as store:     # W1's map, then the commits
+        assert sum(v.merge_parent is None for v in store.log()) == 1 + commits
     assert main(["fleet", "--scenario", str(path), "--robots", "9", "--no-progress"]) == 2
     assert capsys.readouterr().err.strip() == \
         "mapupdate fleet: error: robots must be a whole number in 1..8, got 9"

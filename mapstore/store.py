@@ -235,8 +235,8 @@ class Store:
             if status is None:
                 status = "pending" if self.require_approval else "approved"
             self._insert(number, plan.parent, status, grid, meta_text, plan.packed, uid=uid)
-            if plan.latest is not None and not plan.holds_latest:
-                self.merged = self._merge_into(plan.latest, number, grid, status)
+            if plan.merge is not None:
+                self.merged = self._write_merge(plan.latest, number, plan.merge, status)
             self._at("written")
         self._at("committed")
         self._last = (number, grid.copy())
@@ -257,8 +257,12 @@ class Store:
         graph = self._graph()
         holds_latest = (latest is None or parent is None
                         or history.holds(graph, parent, latest))
-        packed = None if same_as is not None else _packed(grid, before)
-        return _Plan(root, latest, parent, same_as, holds_latest, packed)
+        if same_as is not None:
+            return _Plan(root, latest, parent, same_as, None, None)
+        # the committing session is the newest there is: conflicts go to it
+        to_merge = None if holds_latest else self._merged(
+            latest, grid, history.common_ancestor(graph, latest, parent), True)
+        return _Plan(root, latest, parent, None, _packed(grid, before), to_merge)
 
     def _check_frame(self, grid: OccupancyGrid, other: OccupancyGrid, what: str) -> None:
         if not other.same_frame(grid):
@@ -267,30 +271,31 @@ class Store:
                              f"of {what} ({other.shape[0]} x {other.shape[1]} "
                              f"at {other.resolution} m, origin {other.origin})")
 
-    def _merge_into(self, ours: int, theirs: int, theirs_grid: OccupancyGrid,
-                    status: str) -> int:
-        """Write the merge of version ``theirs`` into ``ours`` against their common ancestor
-        as a new version (parents ``ours`` and ``theirs``) and return its number. Under the
-        write lock: ``theirs`` may be a row of this transaction."""
-        graph = self._graph()
-        base = history.common_ancestor(graph, ours, theirs)
-        theirs_wins = (history.newest_session(graph, theirs, base)
-                       >= history.newest_session(graph, ours, base))
+    def _merged(self, ours: int, theirs_grid: OccupancyGrid, base: int | None,
+                theirs_wins: bool) -> "_Merged":
+        """The merge of ``theirs_grid`` into version ``ours`` against version ``base``,
+        packed, ready to write."""
         ours_grid = self.get(ours)
         base_data = None if base is None else self.get(base).data
         result = merge.three_way(base_data, ours_grid.data, theirs_grid.data, theirs_wins)
-        merged = OccupancyGrid(result.data, ours_grid.resolution, ours_grid.origin)
+        grid = OccupancyGrid(result.data, ours_grid.resolution, ours_grid.origin)
+        return _Merged(base, theirs_wins, result, grid, _packed(grid, ours_grid),
+                       merge.pack_conflicts(result.conflicts, cells.LEVEL))
+
+    def _write_merge(self, ours: int, theirs: int, m: "_Merged", status: str) -> int:
+        """Write a merge as a new version whose parents are ``ours`` and ``theirs`` and
+        return its number. Under the write lock: ``theirs`` may be a row of this
+        transaction."""
         number = self._next_number()
-        meta = {"method": "merge", "merge_of": [ours, theirs], "base": base,
-                "rule": merge.RULE, "conflicts_to": "theirs" if theirs_wins else "ours",
-                "cells": result.counts, "robot": self._meta_of(theirs).get("robot")}
-        self._insert(number, ours, status, merged, _json(self.name, meta),
-                     _packed(merged, ours_grid), merge_parent=theirs)
-        idx, vals = merge.pack_conflicts(result.conflicts, cells.LEVEL)
+        meta = {"method": "merge", "merge_of": [ours, theirs], "base": m.base,
+                "rule": merge.RULE, "conflicts_to": "theirs" if m.theirs_wins else "ours",
+                "cells": m.result.counts, "robot": self._meta_of(theirs).get("robot")}
+        self._insert(number, ours, status, m.grid, _json(self.name, meta), m.packed,
+                     merge_parent=theirs)
         self.db.run("INSERT INTO mapstore_conflicts VALUES (?, ?, ?, ?, ?)",
-                    (number, base, len(result.conflicts), idx, vals))
+                    (number, m.base, len(m.result.conflicts), *m.conflicts_packed))
         self._at("merge written")
-        self._last = (number, merged.copy())
+        self._last = (number, m.grid.copy())
         return number
 
     def _next_number(self) -> int:
@@ -373,7 +378,11 @@ class Store:
             if (status == "approved" and latest is not None
                     and not history.holds(graph, number, latest)
                     and not history.holds(graph, latest, number)):
-                self.merged = self._merge_into(latest, number, self.get(number), "approved")
+                base = history.common_ancestor(graph, latest, number)
+                theirs_wins = (history.newest_session(graph, number, base)
+                               >= history.newest_session(graph, latest, base))
+                m = self._merged(latest, self.get(number), base, theirs_wins)
+                self.merged = self._write_merge(latest, number, m, "approved")
         return number
 
     @_one_line_errors
@@ -505,8 +514,18 @@ class _Plan:
     latest: int | None          # its latest approved version when planned
     parent: int | None
     same_as: int | None         # a first map equal to the store's: that version, no new one
-    holds_latest: bool          # the parent holds the latest's changes: nothing to merge
     packed: tuple | None
+    merge: "_Merged | None"     # the merge with the latest, when the parent does not hold it
+
+
+@dataclass(frozen=True)
+class _Merged:
+    base: int | None
+    theirs_wins: bool
+    result: merge.Merge
+    grid: OccupancyGrid
+    packed: tuple
+    conflicts_packed: tuple[bytes, bytes]
 
 
 def _packed(grid: OccupancyGrid, before: OccupancyGrid | None):

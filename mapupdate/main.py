@@ -103,9 +103,14 @@ def _add_run(sub) -> None:
                                          "warehouse (docs/fleet.md)")
     fleet.add_argument("--scenario", default=None, help="built-in name or scenario file")
     fleet.add_argument("--robots", type=int, default=2, help="1..8 (default 2)")
-    fleet.add_argument("--mode", choices=("shared", "per-robot"), default="shared",
-                       help="one updater fed every robot's scans in time order (default), or "
-                            "one per robot merged at the session's end")
+    fleet.add_argument("--mode", choices=("shared", "per-robot", "store"), default=None,
+                       help="one updater fed every robot's scans in time order (default), "
+                            "one per robot merged at the session's end, or one per robot "
+                            "committing to --store (the default with --store)")
+    fleet.add_argument("--store", default=None, metavar="maps.db|postgresql://...",
+                       help="each robot commits its map to this map store every 30 s of the "
+                            "session and takes up the others' merged versions (made if absent; "
+                            "docs/fleet.md)")
     fleet.add_argument("--merge", choices=("vote", "union"), default="vote",
                        help="merge rule of the per-robot mode (default vote)")
     fleet.add_argument("--sessions", type=int, default=None, help="W1 and this many minus one")
@@ -164,10 +169,13 @@ def _add_update(sub) -> None:
                           "jitters from scan to scan with the odometry over this window "
                           f"(default {SMOOTH_WINDOW:g}; 0: the poses as recorded)")
     upd.add_argument("--store", default=None, metavar="maps.db|postgresql://...",
-                     help="commit the updated map as a version of this map store (made if "
-                          "absent), starting from its latest approved map (docs/map_store.md)")
+                     help="commit the updated map as a version of this map store, starting "
+                          "from its latest approved map (made only when --map gives the map "
+                          "it starts from; docs/map_store.md). A commit that fails keeps the "
+                          "session in the spool (exit 3) for 'mapupdate store push'")
     upd.add_argument("--robot", default=None, metavar="NAME",
                      help="the robot's name recorded with the version (default: the host name)")
+    _add_spool(upd)
     upd.set_defaults(command_at=("robot_commands", "update"))
 
 
@@ -259,9 +267,16 @@ def _add_score(sub) -> None:
 STORE_HELP = "the map store: an SQLite file (maps.db) or a postgresql:// URL"
 
 
+def _add_spool(p) -> None:
+    p.add_argument("--spool", type=Path, default=None, metavar="DIR",
+                   help="where sessions whose commit failed wait for 'store push' (default: "
+                        "$MAPUPDATE_SPOOL, else $XDG_DATA_HOME/mapupdate/spool, "
+                        "~/.local/share/mapupdate/spool)")
+
+
 def _add_store(sub) -> None:
     st = sub.add_parser("store", help="versions of a map: log, show, diff, export, rollback, "
-                                      "tags, review (docs/map_store.md)")
+                                      "tags, review, push (docs/map_store.md)")
     acts = st.add_subparsers(dest="action", required=True)
 
     def action(name, text, *positional):
@@ -290,6 +305,9 @@ def _add_store(sub) -> None:
     tag.add_argument("--store", required=True, metavar="maps.db|postgresql://...",
                      help=STORE_HELP)
     tag.set_defaults(command_at=("robot_commands", "store"))
+    push = action("push", "commit the sessions the spool keeps for the store (those whose "
+                          "commit failed), oldest first; exit 3 when some stay")
+    _add_spool(push)
     for name, text in (("approve", "serve a pending version to robots"),
                        ("reject", "refuse a pending version")):
         review = action(name, text, version)

@@ -4,16 +4,21 @@ psycopg, the ``store`` extra)."""
 
 from __future__ import annotations
 
+import inspect
+import os
+import shlex
 import socket
-import tempfile
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from evaluation import case_folder, edited_world
-from gridmap import load_map, save_map
+from gridmap import MapUpdatingError, load_map, save_map
 from gridmap.metrics import compare_maps
-from mapstore import StoreError, open_store, report
+from mapstore import StoreError, open_store, report, spool
+from mapstore.backends import is_url
 from mapstore.png import write_diff_png
 from robot import logmap, replay
 from robot.outputs import check_outputs, map_files, map_inputs
@@ -81,31 +86,179 @@ def _update_into_store(args) -> int:
     """Update the store's latest approved map (or ``--map``, which must be it, or which
     starts an empty store) from the log and commit the result as a version whose parent is
     that map. A rejected version is never the start of a session, and no updater state
-    (``--state``) carries its evidence over: a session proposes what its own scans show."""
+    (``--state``) carries its evidence over: a session proposes what its own scans show.
+
+    The store is open only to read the parent (after pushing what the spool holds for it)
+    and, once the session has run, to commit; when that commit fails, the session is kept in
+    the spool (exit 3) for ``mapupdate store push``: no session's map is lost."""
     if args.state is not None:
         raise StoreError("--state does not go with --store: a session committed to a store "
                          "starts from the store's latest approved map with fresh evidence")
-    with open_store(args.store, create=True) as store, \
-            tempfile.TemporaryDirectory(prefix="mapupdate-") as tmp:
-        parent, map_path = _session_start(store, args.map, Path(tmp))
-        out = args.out or Path(tmp) / "updated.yaml"
-        trajectory = args.trajectory or Path(tmp) / "trajectory.tum"
+    folder = spool.folder(args.spool)
+    uid = spool.new_uid()
+    spool.remove_stale_work()
+    why = spool.writable(folder)
+    if why is not None:
+        print(f"mapupdate update: warning: the spool cannot be written ({why}): a failed "
+              "commit would lose this session's map (--spool DIR or $MAPUPDATE_SPOOL)",
+              file=sys.stderr)
+    with spool.working_folder() as tmp:
+        with _open_to_start(args) as store:
+            _push_spool(store, spool.entries(folder, args.store)[0], at_start=True)
+            parent, map_path = _session_start(store, args.map, tmp)
+        first = load_map(args.map) if parent is None else None
+        out = args.out or tmp / "updated.yaml"
+        trajectory = args.trajectory or tmp / "trajectory.tum"
         summary, config = _update(args, map_path, out, trajectory)
-        if parent is None:
-            parent = _first_version(store, args.map)
-        meta = _session_meta(args, summary, config, trajectory, parent)
-        number = store.commit(load_map(out), parent, meta)
-        status = store.version(number).status
-        if args.out is None:
-            summary["out"] = f"{store.name} v{number}"
+        meta = {**_session_meta(args, summary, config, trajectory, parent), "uid": uid}
+        session = spool.Session(uid, load_map(out), parent, meta, first,
+                                _first_meta(args.map) if first is not None else None)
         if args.trajectory is None:         # the temporary one is not the user's
             summary["trajectory"] = None
-        lines = summaries.update_lines(summary)
-        lines.append(f"committed v{number} to {store.name} (parent v{parent}; {status}"
-                     + (": 'mapupdate store approve' serves it to robots" if status == "pending"
-                        else "") + ")")
-    print("\n".join(lines))
+        try:
+            with open_store(args.store) as store:
+                done = _commit_session(store, session)
+                line = _committed_line(store, done)
+        except (StoreError, KeyboardInterrupt) as e:
+            return _spooled(args, folder, session, summary, e)
+    if args.out is None:
+        summary["out"] = f"{store.name} v{done.number}"
+    if done.first is not None:
+        print(f"committed {args.map} to {store.name} as v{done.first}, the first map")
+    print("\n".join(summaries.update_lines(summary) + [line]))
     return 0
+
+
+def _open_to_start(args):
+    """The store a session starts from. A missing or empty one is made only when --map gives
+    the map it starts from: a mistyped --store names itself and leaves nothing behind."""
+    target = args.store
+    if args.map is None and not is_url(target) and not Path(target).exists():
+        raise StoreError(f"{target}: no map store there, so it holds no approved map yet; "
+                         "give --map to start it (nothing was made)")
+    return open_store(target, create=args.map is not None)
+
+
+# the exit code of update and store push when a session's map waits in the spool
+SPOOLED = 3
+
+
+def _spooled(args, folder: Path, session, summary: dict, error: BaseException) -> int:
+    """Keep the session whose commit failed in the spool and say where, in one line."""
+    text = " ".join(str(error).split()) or "interrupted"
+    try:
+        entry = spool.write(folder, args.store, session, text)
+    except OSError as e:
+        raise StoreError(f"not committed ({text}), and the spool cannot keep the session's map "
+                         f"({e})") from None
+    if args.out is None:
+        summary["out"] = entry.path / "map.yaml"
+    print("\n".join(summaries.update_lines(summary)))
+    print(f"mapupdate update: not committed ({text}); the session's map is kept in "
+          f"{entry.path}; commit it later with: {_push_command(args.store, args.spool)}",
+          file=sys.stderr)
+    return 130 if isinstance(error, KeyboardInterrupt) else SPOOLED
+
+
+def _push_command(target, spool_arg) -> str:
+    """The command that pushes the spool: the store without a password, --spool when the
+    spool is not the default one."""
+    folder = spool_arg if spool_arg is not None else os.environ.get(spool.ENV) or None
+    return f"mapupdate store push --store {shlex.quote(spool.target_name(target))}" + (
+        f" --spool {shlex.quote(str(Path(folder).expanduser().resolve()))}" if folder else "")
+
+
+@dataclass
+class _Done:
+    number: int                     # the session's version
+    parent: int
+    already: bool                   # it was in the store already (an earlier push's)
+    first: int | None = None        # the first map's version, when this commit made it
+
+
+def _commit_session(store, session) -> _Done:
+    """Commit a session (its first map first, when it started an empty store), each at most
+    once whatever is retried: a commit carries its uid."""
+    parent, first = session.parent, None
+    if parent is None:
+        parent, already = _commit_once(store, session.first, None, session.first_meta,
+                                       f"{session.uid}-first", status="approved")
+        first = None if already else parent
+    meta = {**session.meta, "started_from": parent}
+    number, already = _commit_once(store, session.grid, parent, meta, session.uid)
+    return _Done(number, parent, already, first)
+
+
+def _commit_once(store, grid, parent, meta, uid, status=None) -> tuple[int, bool]:
+    """(the version's number, whether it was in the store already). The store finds a uid
+    it holds and writes nothing; a store that takes no uid yet is searched for it."""
+    meta = {**meta, "uid": uid}
+    head = store.latest(approved_only=False)
+    if "uid" in inspect.signature(store.commit).parameters:
+        number = store.commit(grid, parent, meta, status=status, uid=uid)
+    else:
+        held = [v.number for v in store.log() if v.meta.get("uid") == uid]
+        if held:
+            return held[0], True
+        number = store.commit(grid, parent, meta, status=status)
+    return number, head is not None and number <= head
+
+
+def _committed_line(store, done: _Done) -> str:
+    if done.already:
+        return f"v{done.number} was in {store.name} already {_outcome(store, done)}"
+    return f"committed v{done.number} to {store.name} {_outcome(store, done)}"
+
+
+def _outcome(store, done: _Done) -> str:
+    """"(parent v9; approved), merged with v10 as v11 (2 conflicts)"."""
+    status = store.version(done.number).status
+    if done.already:
+        return f"(parent v{done.parent}; {status})"
+    return (f"(parent v{done.parent}; {status}"
+            + (": 'mapupdate store approve' serves it to robots" if status == "pending" else "")
+            + ")" + _merged_text(store, done.number))
+
+
+def _merged_text(store, number: int) -> str:
+    """", merged with v6 as v8 (3 conflicts)" when the store merged the commit with what came
+    since its parent, else ""."""
+    merged = getattr(store, "merged", None)
+    if not merged or merged == number:
+        return ""
+    info = store.version(merged)
+    other = info.parent if info.parent != number else getattr(info, "merge_parent", None)
+    n = int(info.counts.get("conflicts", (info.meta.get("cells") or {}).get("conflicts", 0)))
+    return (f", merged with v{other}" if other is not None else ", merged") + \
+        f" as v{merged} ({n} conflict{'' if n == 1 else 's'})"
+
+
+def _push_spool(store, found: list, at_start: bool = False) -> list[str]:
+    """Commit the spooled sessions ``found`` for this store, oldest first, each with its own
+    parent and uid; an entry is removed once its commit succeeded. Stops at the first that
+    fails (the rest keep their order: the store settles a merge's conflicts by commit order).
+    Prints a line per entry; returns the names of those kept."""
+    if at_start and found:
+        print(f"pushing {len(found)} spooled session{'' if len(found) == 1 else 's'} for "
+              f"{store.name} first")
+    kept, failed = [], None
+    for entry in found:
+        if failed is not None:
+            print(f"kept {entry.name}: not tried, as {failed} before it was kept")
+            kept.append(entry.name)
+            continue
+        try:
+            done = _commit_session(store, entry.session())
+            text = _outcome(store, done)
+        except (MapUpdatingError, OSError, KeyError, ValueError) as e:   # a store's, a file's
+            print(f"kept {entry.name}: {' '.join(str(e).split()) or type(e).__name__}")
+            kept.append(failed := entry.name)
+            continue
+        spool.remove(entry)
+        first = f", its first map as v{done.first}" if done.first is not None else ""
+        print(f"pushed {entry.name}: " + (f"already in the store as v{done.number} {text}"
+                                          if done.already else f"v{done.number} {text}{first}"))
+    return kept
 
 
 def _session_start(store, map_arg, tmp: Path) -> tuple[int | None, Path]:
@@ -129,14 +282,11 @@ def _session_start(store, map_arg, tmp: Path) -> tuple[int | None, Path]:
     return parent, Path(map_arg)
 
 
-def _first_version(store, map_arg) -> int:
-    """The map given to an empty store, committed as its first version once the session that
-    starts from it has run (a failed session leaves the store as it was)."""
-    first = store.commit(load_map(map_arg), None, {"method": "import", "source": str(map_arg),
-                                                   "project_version": __version__},
-                         status="approved")
-    print(f"committed {map_arg} to {store.name} as v{first}, the first map")
-    return first
+def _first_meta(map_arg) -> dict:
+    """What made the first version of a store: the map given to start it, committed (approved:
+    a store starts from a map someone chose) once the session that starts from it has run (a
+    failed session leaves the store as it was)."""
+    return {"method": "import", "source": str(map_arg), "project_version": __version__}
 
 
 def _session_meta(args, summary: dict, config, trajectory: Path, parent: int) -> dict:
@@ -213,11 +363,35 @@ def score(args) -> int:
 # --- store ---------------------------------------------------------------------------------
 
 def store(args) -> int:
+    if args.action == "push":
+        return push(args)
     create = args.action == "init"
     with open_store(args.store, create=create) as st:
         lines = STORE_ACTIONS[args.action](st, args)
     print("\n".join(lines))
     return 0
+
+
+def push(args) -> int:
+    """``store push``: commit the spool's sessions for the store; 0 when none is left, 3
+    when some stay."""
+    folder = spool.folder(args.spool)
+    found, others, bad = spool.entries(folder, args.store)
+    for name, why in bad:
+        print(f"skipped {folder / name}: not a spool entry ({why})")
+    if not found:
+        print(f"{spool.target_name(args.store)}: no spooled sessions in {folder}"
+              + (f" ({others} for other stores)" if others else ""))
+        return 0
+    try:
+        st = open_store(args.store)
+    except StoreError as e:
+        for entry in found:
+            print(f"kept {entry.name}: {' '.join(str(e).split())}")
+        return SPOOLED
+    with st:
+        kept = _push_spool(st, found)
+    return SPOOLED if kept else 0
 
 
 def _store_init(st, args) -> list[str]:

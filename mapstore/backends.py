@@ -1,6 +1,7 @@
 """The two databases a map store lives in, behind one small interface: an SQLite file (the
 default, nothing to start) and PostgreSQL (for a fleet, through psycopg 3). The store writes
-one SQL dialect, with ``?`` placeholders; this module turns it into each database's."""
+one SQL dialect, with ``?`` placeholders; this module turns it into each database's. No
+message ever holds the URL's password."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import re
 import sqlite3
 from contextlib import contextmanager
 from pathlib import Path
+from urllib.parse import unquote
 
 from gridmap import MapUpdatingError
 
@@ -16,7 +18,20 @@ CONNECT_TIMEOUT = 5          # [s] to reach a PostgreSQL server before the store
 # the lock well under a second, so a minute means something is stuck
 LOCK_TIMEOUT = 60
 SQLITE_MAGIC = b"SQLite format 3\x00"
-URL_SCHEMES = ("postgresql://", "postgres://")
+URL_SCHEMES = ("postgresql", "postgres")
+SCHEME = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*):(//)?")
+# a libpq "key=value ..." string: told apart from a file name by a keyword at its start or
+# after a space
+LIBPQ_KEYWORDS = re.compile(r"(?:^|\s)(?:host|hostaddr|port|dbname|user|password|passfile|"
+                            r"service|sslmode|connect_timeout|options|application_name)\s*=",
+                            re.I)
+# an authority that reads as host:port (a name or an IPv6 address in brackets)
+HOST_PORT = re.compile(r"(?:[^:@\[\]]*|\[[0-9A-Fa-f:.]*\]):\d{1,5}")
+# a URL's query parameter, or a key=value pair, that holds a secret (password, sslpassword,
+# oauth_client_secret)
+SECRET_PARAM = re.compile(r"(?i)([?&][^=&]*(?:password|secret)[^=&]*=)([^&]*)")
+SECRET_PAIR = re.compile(r"(?i)((?:^|\s)\w*(?:password|secret)\w*\s*=\s*)"
+                         r"('(?:[^'\\]|\\.)*'?|\S*)")
 
 
 class StoreError(MapUpdatingError):
@@ -25,14 +40,168 @@ class StoreError(MapUpdatingError):
 
 
 def is_url(target) -> bool:
-    return isinstance(target, str) and target.startswith(URL_SCHEMES)
+    """A PostgreSQL URL (the scheme in any case)."""
+    if not isinstance(target, str):
+        return False
+    found = SCHEME.match(target.strip())
+    return bool(found and found.group(2) and found.group(1).lower() in URL_SCHEMES)
 
 
-def redacted(url: str) -> str:
-    """The URL without its password, for messages."""
-    return re.sub(r"(://[^:/@]*):[^@]*@", r"\1:***@", url)
+# --- passwords ---------------------------------------------------------------------------------
+def _userinfo_end(rest: str) -> tuple[int, bool]:
+    """(where the user:password of a URL's text after ``scheme://`` ends, its ``@``, or -1;
+    whether it ends beyond the authority a URL parser would read). The last ``@`` before the
+    first ``/`` ends it, so an unencoded ``@`` in the password stays the password's; when
+    there is none there but a later ``@`` has a ``:`` before it, the password may hold an
+    unencoded ``/``: taken as one too, so that it is never printed. (An authority that reads
+    as host:port leaves a later ``@`` to the path or the parameters, where it may stand.)"""
+    slash = rest.find("/")
+    authority = rest if slash < 0 else rest[:slash]
+    at = authority.rfind("@")
+    if at >= 0:
+        return at, False
+    at = rest.rfind("@")
+    if at >= 0 and ":" in rest[:at]:
+        return at, not HOST_PORT.fullmatch(authority)
+    return -1, False
 
 
+def redacted(target) -> str:
+    """``target`` with every secret it holds as ``***``: a URL's password (up to the last
+    ``@`` of its authority), its ``?password=`` and ``&password=`` parameters, a libpq
+    key=value string's ``password=``. For messages and names."""
+    text = str(target)
+    found = SCHEME.match(text.strip())
+    if found is None or not (found.group(2) or "@" in text):
+        return SECRET_PAIR.sub(r"\1***", text)
+    start = len(text) - len(text.lstrip()) + found.end()
+    rest = text[start:]
+    at, _ = _userinfo_end(rest)
+    colon = rest.find(":", 0, max(at, 0))
+    if at >= 0 and colon >= 0:
+        rest = f"{rest[:colon + 1]}***{rest[at:]}"
+    return SECRET_PAIR.sub(r"\1***", text[:start] + SECRET_PARAM.sub(r"\1***", rest))
+
+
+def _secrets_of(url: str) -> list[str]:
+    """The password of ``url`` and every secret parameter's value, as written and decoded,
+    longest first: removed from any text a driver returns, whatever it echoes of the URL."""
+    rest = url.strip().split("://", 1)[-1]
+    at, _ = _userinfo_end(rest)
+    found = [rest[:at].partition(":")[2]] if at >= 0 and ":" in rest[:at] else []
+    found += [m.group(2) for m in SECRET_PARAM.finditer(rest)]
+    found += [unquote(s) for s in found]
+    return sorted({s for s in found if s}, key=len, reverse=True)
+
+
+def _scrubbed(text: str, secrets: list[str]) -> str:
+    text = redacted(" ".join(text.split()))
+    for secret in secrets:
+        text = text.replace(secret, "***")
+    return text
+
+
+def _for_libpq(url: str) -> str:
+    """``url`` as libpq reads it: the scheme in lower case (libpq reads ``POSTGRESQL://`` as
+    a key=value string, and echoes it whole in its error), an ``@`` of the password
+    percent-encoded (libpq ends the password at the first ``@`` and reads the rest of it as
+    the host's name)."""
+    text = url.strip()
+    rest = text.split("://", 1)[1]
+    at, beyond = _userinfo_end(rest)
+    if beyond:
+        raise StoreError(f"{redacted(text)}: the URL has an '@' after a '/' with a ':' before "
+                         "it; percent-encode a '/' of the password as %2F (and an '@' of the "
+                         "database's name or a parameter as %40)")
+    if at >= 0:
+        rest = rest[:at].replace("@", "%40") + rest[at:]
+    return "postgresql://" + rest
+
+
+def _refuse_other_forms(text: str) -> None:
+    """A target that is no PostgreSQL URL but no file name either: another or a misspelt
+    scheme (``postgressql://``, ``pg://``), ``postgresql:`` without ``//``, a libpq key=value
+    string. Refused rather than taken as an SQLite file's name (printed whole, password and
+    all, in its 'no map store there')."""
+    text = text.strip()
+    found = SCHEME.match(text)
+    if found and (found.group(2) or "@" in text):
+        scheme = found.group(1)
+        if scheme.lower() in URL_SCHEMES:
+            raise StoreError(f"{redacted(text)}: not a URL; give postgresql://user:password@"
+                             "host/database")
+        raise StoreError(f"{redacted(text)}: unknown scheme {scheme!r} (a PostgreSQL store "
+                         "is a postgresql:// URL, an SQLite store a file's path)")
+    if LIBPQ_KEYWORDS.search(text):
+        raise StoreError(f"{redacted(text)}: a libpq key=value string; give a postgresql:// "
+                         "URL (postgresql://user:password@host:port/database)")
+
+
+# --- connection errors ---------------------------------------------------------------------------
+# (what psycopg's text says, the kind, what to say): libpq reports a failed connection as text
+# only (no SQLSTATE), the server's FATAL message within it
+CONNECT_PROBLEMS = (
+    (r"password authentication failed for user \"([^\"]*)\"", "auth",
+     "authentication failed for user \"{0}\": wrong password"),
+    (r"authentication failed for user \"([^\"]*)\"", "auth",
+     "authentication failed for user \"{0}\""),
+    (r"no password supplied|password is required", "auth",
+     "the server asks for a password and the URL gives none"),
+    (r"role \"([^\"]*)\" does not exist", "role",
+     "no user (role) \"{0}\" on the server; check the URL's user name"),
+    (r"database \"([^\"]*)\" does not exist", "database",
+     "no database \"{0}\" on the server; create it or check the URL"),
+    (r"no pg_hba\.conf entry", "refused",
+     "the server lets in no connection from this host as this user to this database "
+     "(its pg_hba.conf)"),
+    (r"the database system is (starting up|shutting down|in recovery mode|not yet accepting)",
+     "starting", "the server is {0}; try again"),
+    (r"too many (?:connections|clients)", "busy", "the server has too many connections"),
+    (r"connection refused", "unreachable", "connection refused"),
+    (r"timeout expired|timed out", "unreachable", "no answer"),
+    (r"failed to resolve host|could not translate host name|name or service not known",
+     "unreachable", "unknown host"),
+    (r"no route to host|network is unreachable|host is down", "unreachable", "no route to host"),
+    (r"server closed the connection unexpectedly|connection reset", "unreachable",
+     "the server closed the connection"),
+)
+
+
+class _NoConnection(StoreError):
+    """A connection that could not be made, and ``why``; ``lasting``: trying again would not
+    help (a wrong password, no such user or database)."""
+
+    def __init__(self, message: str, why: str, lasting: bool):
+        super().__init__(message)
+        self.why, self.lasting = why, lasting
+
+
+def connect_problem(text: str) -> tuple[str, str]:
+    """(kind, what to say) of psycopg's text for a connection that failed: kinds ``auth``,
+    ``role``, ``database``, ``refused``, ``starting``, ``busy``, ``unreachable``, or ``other``
+    (the text's first line)."""
+    for pattern, kind, say in CONNECT_PROBLEMS:
+        found = re.search(pattern, text, re.I)
+        if found:
+            return kind, say.format(*found.groups())
+    lines = str(text).strip().splitlines()
+    return "other", lines[0].strip() if lines else "no reason given"
+
+
+def connect_error(name: str, text: str, secrets: list[str]) -> _NoConnection:
+    """The one-line error of a connection to ``name`` that failed with psycopg's ``text``."""
+    kind, say = connect_problem(text)
+    say = _scrubbed(say, secrets)
+    if kind == "unreachable":
+        message = f"{name}: cannot reach the database within {CONNECT_TIMEOUT} s ({say})"
+    elif kind == "other":
+        message = f"{name}: cannot connect ({say})"
+    else:
+        message = f"{name}: {say}"
+    return _NoConnection(message, say, lasting=kind in ("auth", "role", "database", "refused"))
+
+
+# --- the two databases ---------------------------------------------------------------------
 class SQLiteDB:
     """One SQLite file. Writes hold the file's write lock from their first statement
     (BEGIN IMMEDIATE), so two writers serialise instead of failing at their commit; WAL lets
@@ -100,7 +269,9 @@ class PostgresDB:
     blob, real = "BYTEA", "DOUBLE PRECISION"
 
     def __init__(self, url: str):
-        self.name = redacted(url)
+        self.name = redacted(url.strip())
+        self._secrets = _secrets_of(url)
+        self._url = _for_libpq(url)
         try:
             import psycopg
         except ImportError:
@@ -108,11 +279,10 @@ class PostgresDB:
                              "install leaves out: pip install 'lidar-map-updating[store]'"
                              ) from None
         try:
-            self.conn = psycopg.connect(url, autocommit=True, connect_timeout=CONNECT_TIMEOUT)
+            self.conn = psycopg.connect(self._url, autocommit=True,
+                                        connect_timeout=CONNECT_TIMEOUT)
         except psycopg.Error as e:
-            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise StoreError(f"{self.name}: cannot reach the database within "
-                             f"{CONNECT_TIMEOUT} s ({first})") from None
+            raise connect_error(self.name, str(e), self._secrets) from None
         self.conn.execute(f"SET lock_timeout = '{LOCK_TIMEOUT}s'")
 
     def rows(self, sql: str, params=()) -> list[tuple]:
@@ -139,10 +309,12 @@ class PostgresDB:
 
 
 def connect(target, create: bool = False):
-    """The database of ``target``: a ``postgresql://`` URL, else the path of an SQLite file
-    (made when ``create``)."""
+    """The database of ``target``: a ``postgresql://`` URL (the scheme in any case), else the
+    path of an SQLite file (made when ``create``). A target that looks like neither (another
+    scheme, a libpq key=value string) is refused, its password never printed."""
     if is_url(target):
         return PostgresDB(target)
+    _refuse_other_forms(str(target))
     return SQLiteDB(Path(target), create)
 
 

@@ -13,6 +13,7 @@ import re
 import shlex
 import shutil
 import signal
+import socket
 import sqlite3
 import subprocess
 import sys
@@ -295,12 +296,15 @@ def test_a_killed_update_leaves_its_working_folder_to_the_next(room, capsys):
         p.wait()
     [left] = list((room / "tmp").iterdir())
     assert left.name.startswith(f"mapupdate-{p.pid}-") and (left / "start.yaml").exists()
+    # and a spool entry it was writing when killed (hidden until renamed into place)
+    half = room / "spool" / f".tmp-{p.pid}@{socket.gethostname()}-0123abcd"
+    half.mkdir(parents=True)
     # a live process's folder stays, whatever its age
     with spool.working_folder() as live:
         os.utime(live, (0, 0))
         assert update(capsys, room, target)[0] == 0
         assert list((room / "tmp").iterdir()) == [live]
-    assert list((room / "tmp").iterdir()) == []
+    assert list((room / "tmp").iterdir()) == [] and list((room / "spool").iterdir()) == []
 
 
 def test_the_spool_folder_is_chosen_as_documented(monkeypatch, tmp_path):

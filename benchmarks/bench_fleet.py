@@ -1,7 +1,8 @@
 """Several robots, one map: the fleet of ``scenarios.fleet`` in the built-in warehouse, N = 1..4
 robots, each way of updating the map, sessions W2-W4 chained from one M1.
 
-    python benchmarks/bench_fleet.py [--robots 1 2 3 4] [--seeds 7] [--out runs/bench_fleet]
+    python benchmarks/bench_fleet.py [--robots 1 2 3 4] [--seeds 7] [--modes shared store]
+        [--out runs/bench_fleet]
 
 Prints one row per run and session, then the mean over the update sessions per N and mode:
 precision, recall, OPDF, ghosts, and how soon the map showed the target cells right (median
@@ -31,10 +32,10 @@ from scenarios.session import session_seeds  # noqa: E402
 
 # (mode, merge rule, other robots hidden from the update)
 VARIANTS = (("shared", "vote", True), ("per-robot", "vote", True), ("per-robot", "union", True),
-            ("shared", "vote", False), ("per-robot", "union", False))
+            ("shared", "vote", False), ("per-robot", "union", False), ("store", "vote", True))
 MEAN_KEYS = ("precision", "recall", "opdf", "ghosts", "ghosts_of_robots", "targets",
              "targets_fixed", "latency_median_s", "latency_p90_s", "committed_at_s",
-             "scans_processed", "cpu_s")
+             "scans_processed", "cpu_s", "commits", "merges", "conflicts")
 
 
 def mean_rows(rows: list[dict]) -> list[dict]:
@@ -47,7 +48,7 @@ def mean_rows(rows: list[dict]) -> list[dict]:
         row = {"robots": n, "mode": group[0]["mode"], "merge_rule": group[0]["merge_rule"],
                "mask_robots": group[0]["mask_robots"], "session": "mean"}
         for key in MEAN_KEYS:
-            values = [g[key] for g in group if g[key] is not None]
+            values = [g[key] for g in group if g.get(key) is not None]
             row[key] = float(np.mean(values)) if values else None
         out.append(row)
     return out
@@ -59,6 +60,9 @@ def main() -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[7])
     p.add_argument("--sessions", type=int, default=None)
     p.add_argument("--out", type=Path, default=Path("runs/bench_fleet"))
+    p.add_argument("--modes", nargs="+", default=None, choices=("shared", "per-robot", "store"),
+                   help="only these modes (default every variant); the store mode commits to "
+                        "an SQLite store of its own per run")
     args = p.parse_args()
     scn = sim.load_scenario(find_scenario("aws_small_warehouse"))
     rows = []
@@ -67,8 +71,17 @@ def main() -> int:
         m1 = build_initial_map(scn, 0, session_seeds(seed, len(scn.sessions))[0]).updated
         for n in args.robots:
             for mode, rule, mask in VARIANTS:
+                if args.modes and mode not in args.modes:
+                    continue
+                store = None
+                if mode == "store":
+                    args.out.mkdir(parents=True, exist_ok=True)
+                    store = args.out / f"site-{seed}-{n}.db"
+                    for old in args.out.glob(store.name + "*"):
+                        old.unlink()
                 opts = FleetOptions(robots=n, mode=mode, merge_rule=rule, seed=seed,
-                                    mask_robots=mask, sessions=args.sessions, progress=False)
+                                    mask_robots=mask, sessions=args.sessions, progress=False,
+                                    store=None if store is None else str(store))
                 record = run_fleet("aws_small_warehouse", opts, initial=m1)
                 for row in record["sessions"]:
                     row["seed"] = seed

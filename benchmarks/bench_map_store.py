@@ -7,13 +7,24 @@ SQLite runs in WAL mode with synchronous=FULL, PostgreSQL with fsync on: a finis
 on disk in both. Each session moves ``PALLETS`` pallets (drawn where there was floor, freed where one stood)
 and flips ``SPECKS`` single cells (the noise a real update leaves), about 15 000 changed cells,
 on a warehouse of rack rows whose insides the lidar never sees (unknown).
-Usage: ``python benchmarks/bench_map_store.py [--commits N] [--quick]``.
+
+``--fleet 8 32``: that many robots (processes) commit at once to one PostgreSQL server (fsync
+on), each ``--fleet-commits`` sessions on a 200 x 200 m site at 5 cm (4000 x 4000 cells): a
+robot reads the site's latest version, works for a while (0.2-1 s), moves pallets in a part
+of the site it shares with one neighbour and commits from the version it read, so that most
+commits are merged with what others committed meanwhile. Printed: commits per second, the
+time of a commit with and without a merge, the conflicts, and whether the site map equals
+the robots' own changes replayed in commit order (nothing lost).
+
+Usage: ``python benchmarks/bench_map_store.py [--commits N] [--quick] [--fleet N ...]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -116,7 +127,13 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--commits", type=int, default=8)
     p.add_argument("--quick", action="store_true", help="a 100 x 62.5 m map")
+    p.add_argument("--fleet", type=int, nargs="*", default=None, metavar="N",
+                   help="only the fleet: N robots committing at once to PostgreSQL")
+    p.add_argument("--fleet-commits", type=int, default=3)
+    p.add_argument("--fleet-size", type=int, default=4000, help="cells a side (default 4000)")
     a = p.parse_args()
+    if a.fleet is not None:
+        return fleet_table(a.fleet or [8, 32], a.fleet_commits, a.fleet_size)
     width, height = (2000, 1250) if a.quick else (8000, 5000)
     print("| map | store | commits/s | commit s | first commit s | MB per version | read s | "
           "parent diff ms |")
@@ -164,6 +181,100 @@ def _postgres(maps):
         return measure(srv.new_database(), maps, postgres_size)
     finally:
         srv.stop()
+
+
+# --- a fleet committing at once --------------------------------------------------------------------
+ROBOT = """
+import json, sys, time, numpy as np
+from gridmap import OccupancyGrid
+from mapstore import open_store
+target, k, n, commits, go = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+rng = np.random.default_rng(100 + k)
+import os
+while not os.path.exists(go):
+    time.sleep(0.01)
+out = []
+with open_store(target) as s:
+    for c in range(commits):
+        parent = s.latest()
+        start = s.get(parent)
+        time.sleep(rng.uniform(0.2, 1.0))                 # the session
+        d = start.data.copy()
+        h, w = d.shape
+        band = h // n                                     # this robot's part, and its neighbour's
+        for _ in range(12):
+            r = int(rng.integers(k * band, min(h - 30, (k + 2) * band)))
+            col = int(rng.integers(10, w - 30))
+            d[r:r + 24, col:col + 20] = rng.choice([0, 100, -1])
+        t0 = time.perf_counter()
+        number = s.commit(start.with_data(d), parent, {"robot": f"robot{k}"})
+        dt = time.perf_counter() - t0
+        merged = s.merged
+        out.append({"commit_s": dt, "merged": merged is not None,
+                    "conflicts": len(s.conflicts(merged)) if merged else 0})
+print(json.dumps(out), flush=True)
+"""
+
+
+def fleet_table(sizes: list[int], commits: int, side: int) -> int:
+    import postgres_tools
+    srv, why = postgres_tools.server(fsync=True)
+    if srv is None:
+        print(f"fleet not measured: {why}")
+        return 1
+    print(f"{side} x {side} cells at 5 cm, {commits} sessions a robot, PostgreSQL 15, fsync on")
+    print("| robots | commits | commits/s | merged | commit s (no merge) | commit s (merge), "
+          "median / p90 | conflicts per merge | cells lost |")
+    print("|---|---|---|---|---|---|---|---|")
+    try:
+        for n in sizes:
+            row = fleet_run(srv, n, commits, side)
+            print(f"| {n} | {row['commits']} | {row['per_s']:.2f} | {row['merged']} | "
+                  f"{row['plain_s']} | {row['merge_s']} | {row['conflicts']} | "
+                  f"{row['lost']} |", flush=True)
+    finally:
+        srv.stop()
+    return 0
+
+
+def fleet_run(srv, n: int, commits: int, side: int) -> dict:
+    target = srv.new_database()
+    base = site_map(side, side, NOISE["clean"])
+    with open_store(target, create=True) as store:
+        store.commit(OccupancyGrid(base, 0.05), None, {"method": "import"})
+    with tempfile.TemporaryDirectory() as tmp:
+        go = Path(tmp) / "go"
+        procs = [subprocess.Popen([sys.executable, "-c", ROBOT, target, str(k), str(n),
+                                   str(commits), str(go)], stdout=subprocess.PIPE, text=True,
+                                  cwd=ROOT) for k in range(n)]
+        time.sleep(2.0 + 0.1 * n)                 # every robot connected and waiting
+        t0 = time.perf_counter()
+        go.touch()
+        rows = [r for p in procs for r in json.loads(p.communicate(timeout=3600)[0])]
+        wall = time.perf_counter() - t0
+    plain = [r["commit_s"] for r in rows if not r["merged"]]
+    merged = [r for r in rows if r["merged"]]
+    lost = _cells_lost(target)
+
+    def spread(xs):
+        return (f"{statistics.median(xs):.2f} / {np.percentile(xs, 90):.2f}" if xs else "-")
+    return {"commits": len(rows), "per_s": len(rows) / wall, "merged": len(merged),
+            "plain_s": spread(plain), "merge_s": spread([r["commit_s"] for r in merged]),
+            "conflicts": f"{statistics.median(r['conflicts'] for r in merged):.0f}"
+            if merged else "-", "lost": lost}
+
+
+def _cells_lost(target) -> int:
+    """Cells where the site map differs from the robots' own changes replayed in commit
+    order on the first map, the last change of a cell winning (what the merges promise)."""
+    with open_store(target) as store:
+        log = store.log()
+        site = store.get(log[0].number).data.copy()
+        for v in log[1:]:
+            if v.merge_parent is None:
+                before, after = store.get(v.parent).data, store.get(v.number).data
+                site[before != after] = after[before != after]
+        return int((store.get(store.latest()).data != site).sum())
 
 
 if __name__ == "__main__":

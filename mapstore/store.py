@@ -65,6 +65,9 @@ RESERVED = ("latest", "head")
 VERSION_COLUMNS = ("version, parent, status, created, reviewed, note, width, height, "
                    "resolution, origin_x, origin_y, meta, counts, merge_parent, uid")
 UID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
+# how many times a commit plans outside the write lock before it plans under it (each time
+# another writer moved the latest version while it planned)
+PLAN_TRIES = 3
 
 
 @dataclass(frozen=True)
@@ -220,26 +223,43 @@ class Store:
         if uid is not None and (done := self._by_uid(uid)) is not None:
             return done
         parent = None if parent is None else self.resolve(parent)
-        # the slow part, reading and packing maps, is done before the lock is taken and done
-        # again under it only when another writer moved the latest version meanwhile
+        # the slow part, reading, merging and packing maps, is done before the lock is taken;
+        # when another writer moved the latest version meanwhile it is done again, outside
+        # the lock while tries last, then under it (so a commit always ends)
         plan = self._plan(grid, parent)
-        with self.db.write():
-            self._at("locked")
-            if uid is not None and (done := self._by_uid(uid)) is not None:
-                return done
-            if (self._root(), self.latest()) != (plan.root, plan.latest):
+        for attempt in range(PLAN_TRIES):
+            with self.db.write():
+                self._at("locked")
+                if uid is not None and (done := self._by_uid(uid)) is not None:
+                    return done
+                if (self._root(), self.latest()) != (plan.root, plan.latest):
+                    if attempt + 1 < PLAN_TRIES:
+                        moved = True
+                    else:
+                        plan, moved = self._plan(grid, parent), False
+                else:
+                    moved = False
+                if not moved:
+                    number = self._write_commit(plan, grid, meta_text, status, uid)
+            if moved:
                 plan = self._plan(grid, parent)
-            if plan.same_as is not None:
-                return plan.same_as
-            number = self._next_number()
-            if status is None:
-                status = "pending" if self.require_approval else "approved"
-            self._insert(number, plan.parent, status, grid, meta_text, plan.packed, uid=uid)
-            if plan.merge is not None:
-                self.merged = self._write_merge(plan.latest, number, plan.merge, status)
-            self._at("written")
-        self._at("committed")
-        self._last = (number, grid.copy())
+                continue
+            self._at("committed")
+            if plan.same_as is None:
+                self._last = (number, grid.copy())
+            return number
+        raise AssertionError("unreachable: the last try plans under the lock")
+
+    def _write_commit(self, plan: "_Plan", grid, meta_text, status, uid) -> int:
+        if plan.same_as is not None:
+            return plan.same_as
+        number = self._next_number()
+        if status is None:
+            status = "pending" if self.require_approval else "approved"
+        self._insert(number, plan.parent, status, grid, meta_text, plan.packed, uid=uid)
+        if plan.merge is not None:
+            self.merged = self._write_merge(plan.latest, number, plan.merge, status)
+        self._at("written")
         return number
 
     def _plan(self, grid: OccupancyGrid, parent: int | None) -> "_Plan":

@@ -27,6 +27,7 @@ from gridmap import OccupancyGrid
 
 from . import cells, history, merge
 from .backends import StoreError, connect, database_errors
+from .text import NAME_LIMIT, NOTE_LIMIT, check_text
 
 SCHEMA_VERSION = "2"
 TABLES = ("mapstore_info", "mapstore_versions", "mapstore_maps", "mapstore_changes",
@@ -218,6 +219,7 @@ class Store:
         if uid is not None and not UID.fullmatch(str(uid)):
             raise StoreError(f"{self.name}: {uid!r} cannot be a commit id (1-128 letters, "
                              "digits, '.', '_', ':' or '-')")
+        _check_meta(self.name, meta or {})
         meta_text = _json(self.name, meta or {})
         self.merged = None
         if uid is not None and (done := self._by_uid(uid)) is not None:
@@ -384,6 +386,7 @@ class Store:
         return self._review(v, "rejected", note)
 
     def _review(self, v, status: str, note: str | None) -> int:
+        note = check_text(f"{self.name}: the note", note, NOTE_LIMIT)
         number = self.resolve(v)
         self.merged = None
         with self.db.write():
@@ -553,6 +556,17 @@ def _packed(grid: OccupancyGrid, before: OccupancyGrid | None):
     changes = None if before is None else cells.changes_between(before.data, grid.data)
     return (cells.fingerprint(grid.data, grid.resolution, grid.origin),
             cells.pack_cells(grid.data), changes)
+
+
+# what ``store log`` shows of a version's description, checked as one line of text
+SHOWN_KEYS = {"robot": NAME_LIMIT, "log": 4096, "log_name": 4096, "method": 256,
+              "source": 4096}
+
+
+def _check_meta(name: str, meta: dict) -> None:
+    for key, limit in SHOWN_KEYS.items():
+        if isinstance(meta.get(key), (str, bytes)):
+            check_text(f"{name}: the version's {key.replace('_', ' ')}", meta[key], limit)
 
 
 def _json(name: str, meta: dict) -> str:

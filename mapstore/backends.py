@@ -1,12 +1,22 @@
 """The two databases a map store lives in, behind one small interface: an SQLite file (the
 default, nothing to start) and PostgreSQL (for a fleet, through psycopg 3). The store writes
-one SQL dialect, with ``?`` placeholders; this module turns it into each database's. No
-message ever holds the URL's password."""
+one SQL dialect, with ``?`` placeholders; this module turns it into each database's.
+
+A PostgreSQL store is reached over a network that fails: every statement is bounded in time
+on the server (``statement_timeout``) and on the client (a server stopped, or a network that
+drops packets, never answers, and psycopg would wait for ever); a connection lost between
+statements is made again with backoff, and one lost inside a write is ``ConnectionLost``, for
+the caller to write again. No message ever holds the URL's password."""
 
 from __future__ import annotations
 
+import math
+import os
 import re
+import socket
 import sqlite3
+import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import unquote
@@ -17,6 +27,18 @@ CONNECT_TIMEOUT = 5          # [s] to reach a PostgreSQL server before the store
 # [s] a writer waits for another's transaction: a commit of a 400 x 250 m map at 5 cm holds
 # the lock well under a second, so a minute means something is stuck
 LOCK_TIMEOUT = 60
+# [s] the server's own bound on one statement (its statement_timeout), above LOCK_TIMEOUT so
+# that a writer waiting for the lock ends with the lock's message; the environment variable
+# MAPSTORE_STATEMENT_TIMEOUT sets another. The longest statement of a store writes or reads
+# one packed map (4 MB for 40 M cells): well under a second
+STATEMENT_TIMEOUT = 75.0
+# [s] how much longer the client waits for an answer before it cuts the connection: a server
+# that runs answers with its own timeout first; one that does not run never answers
+ANSWER_MARGIN = 5.0
+# [s] a connection lost between statements is made again for this long (a server restarted
+# for an upgrade or a failover is back within seconds), after 0.2, 0.4, 0.8 ... s, at most 5
+RECONNECT_WINDOW = 30.0
+RECONNECT_DELAYS = (0.2, 5.0)
 SQLITE_MAGIC = b"SQLite format 3\x00"
 URL_SCHEMES = ("postgresql", "postgres")
 SCHEME = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*):(//)?")
@@ -37,6 +59,16 @@ SECRET_PAIR = re.compile(r"(?i)((?:^|\s)\w*(?:password|secret)\w*\s*=\s*)"
 class StoreError(MapUpdatingError):
     """A store that cannot be used as asked: missing, not a store, unreachable, an unknown
     version or tag, a review out of turn. The message names the store and the problem."""
+
+
+class ConnectionLost(StoreError):
+    """The connection to a PostgreSQL server was lost inside a write. Nothing of the write is
+    committed, unless ``at_commit``: lost while committing, it may or may not be; the caller
+    may write it again (the store makes that safe with the commit's id)."""
+
+    def __init__(self, message: str, at_commit: bool = False):
+        super().__init__(message)
+        self.at_commit = at_commit
 
 
 def is_url(target) -> bool:
@@ -135,6 +167,58 @@ def _refuse_other_forms(text: str) -> None:
     if LIBPQ_KEYWORDS.search(text):
         raise StoreError(f"{redacted(text)}: a libpq key=value string; give a postgresql:// "
                          "URL (postgresql://user:password@host:port/database)")
+
+
+# --- timeouts ------------------------------------------------------------------------------
+def statement_timeout() -> float:
+    """[s] the server's bound on one statement: MAPSTORE_STATEMENT_TIMEOUT, else
+    STATEMENT_TIMEOUT."""
+    text = os.environ.get("MAPSTORE_STATEMENT_TIMEOUT")
+    if text is None:
+        return float(STATEMENT_TIMEOUT)
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise StoreError(f"MAPSTORE_STATEMENT_TIMEOUT={text!r}: not a number of seconds above 0")
+    return value
+
+
+def answer_timeout() -> float:
+    """[s] the client's bound on one statement's answer."""
+    return statement_timeout() + ANSWER_MARGIN
+
+
+class _Watchdog:
+    """Cuts a connection whose statement outlives ``limit`` seconds: shuts its socket down, so
+    that psycopg, waiting for an answer that does not come, returns with an error. A stopped
+    server (or a network that drops packets) cannot enforce its own statement_timeout, and
+    psycopg has no timeout of its own for a statement. Disarmed under a lock, it never cuts a
+    connection whose statement has ended."""
+
+    def __init__(self, fileno: int, limit: float):
+        self.fired = False
+        self._fileno, self._ended, self._lock = fileno, False, threading.Lock()
+        self._timer = threading.Timer(limit, self._cut)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _cut(self) -> None:
+        with self._lock:
+            if self._ended:
+                return
+            self.fired = True
+            try:    # a duplicate of the descriptor: shutting it down shuts the socket down
+                with socket.socket(fileno=os.dup(self._fileno)) as s:
+                    s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    def disarm(self) -> None:
+        with self._lock:
+            self._ended = True
+        self._timer.cancel()
 
 
 # --- connection errors ---------------------------------------------------------------------------
@@ -263,7 +347,13 @@ def _check_sqlite_file(path: Path, create: bool) -> None:
 class PostgresDB:
     """One PostgreSQL database. A write is a transaction that first locks the store's row in
     ``mapstore_info``: writers serialise on it, and under READ COMMITTED each statement after
-    the lock sees what the writer before committed, so version numbers never clash."""
+    the lock sees what the writer before committed, so version numbers never clash.
+
+    Each statement is bounded: by the server's statement_timeout, and by the client's
+    ``answer_timeout()`` (a server that does not run never answers). A connection found lost
+    outside a write (a server restarted while a long session held its store open) is made
+    again with backoff and the statement run once more: only reads and session settings run
+    outside a write. One lost inside a write is ``ConnectionLost``."""
 
     kind = "postgresql"
     blob, real = "BYTEA", "DOUBLE PRECISION"
@@ -278,28 +368,129 @@ class PostgresDB:
             raise StoreError(f"{self.name}: a PostgreSQL store needs psycopg, which a robot "
                              "install leaves out: pip install 'lidar-map-updating[store]'"
                              ) from None
+        self._psycopg = psycopg
+        self._in_write = False
+        statement_timeout()         # a wrong MAPSTORE_STATEMENT_TIMEOUT said before connecting
+        self.conn = self._connect()
+
+    def _connect(self):
+        psycopg = self._psycopg
         try:
-            self.conn = psycopg.connect(self._url, autocommit=True,
-                                        connect_timeout=CONNECT_TIMEOUT)
+            conn = psycopg.connect(self._url, autocommit=True, connect_timeout=CONNECT_TIMEOUT)
         except psycopg.Error as e:
             raise connect_error(self.name, str(e), self._secrets) from None
-        self.conn.execute(f"SET lock_timeout = '{LOCK_TIMEOUT}s'")
+        self.conn = conn
+        try:    # the session's settings, made again with each new connection
+            self._bounded(f"SET lock_timeout = '{LOCK_TIMEOUT}s'")
+            self._bounded(f"SET statement_timeout = '{round(statement_timeout() * 1000)}ms'")
+        except (psycopg.Error, StoreError) as e:
+            conn.close()
+            why = _scrubbed(str(e), self._secrets)
+            raise _NoConnection(f"{self.name}: cannot connect ({why})", why, False) from None
+        return conn
+
+    def _reconnect(self) -> None:
+        """A new connection for one found lost, tried with backoff for RECONNECT_WINDOW s."""
+        try:
+            self.conn.close()
+        except self._psycopg.Error:
+            pass
+        deadline = time.monotonic() + RECONNECT_WINDOW
+        delay, longest = RECONNECT_DELAYS
+        while True:
+            try:
+                self.conn = self._connect()
+                return
+            except _NoConnection as e:
+                left = deadline - time.monotonic()
+                if e.lasting:
+                    raise StoreError(str(e)) from None
+                if left <= 0:
+                    raise StoreError(f"{self.name}: lost the connection to the server and could "
+                                     f"not connect again within {RECONNECT_WINDOW:g} s ({e.why})"
+                                     ) from None
+            time.sleep(min(delay, left))    # the last try at the window's end
+            delay = min(2 * delay, longest)
+
+    def _bounded(self, sql: str, params=()) -> list[tuple]:
+        """One statement under the watchdog; its rows (none for a statement without)."""
+        limit = answer_timeout()
+        watchdog = _Watchdog(self.conn.fileno(), limit)
+        try:
+            cur = self.conn.execute(sql, params)
+            return cur.fetchall() if cur.description else []
+        except self._psycopg.Error:
+            if watchdog.fired:
+                raise self._lost(f"the server did not answer within {limit:g} s", sql) from None
+            raise
+        finally:
+            watchdog.disarm()
+
+    def _lost(self, what: str, sql: str) -> StoreError:
+        """The error of a connection lost (or cut for want of an answer) during ``sql``."""
+        if not self._in_write:
+            return StoreError(f"{self.name}: {what}")
+        if sql == "COMMIT":
+            return ConnectionLost(f"{self.name}: {what} while committing a write; it may or may "
+                                  "not have been committed", at_commit=True)
+        return ConnectionLost(f"{self.name}: {what} during a write, which was not committed")
+
+    def _statement(self, sql: str, params=()) -> list[tuple]:
+        """One statement; outside a write, on a connection found lost, reconnected and run
+        once more."""
+        psycopg = self._psycopg
+        for attempt in (1, 2):
+            if self.conn.closed and not self._in_write:
+                self._reconnect()
+            try:
+                return self._bounded(sql.replace("?", "%s"), params)
+            except psycopg.Error as e:
+                if not self.conn.closed:
+                    raise       # the statement's own error; the connection stands
+                first = _scrubbed(str(e).strip().splitlines()[0] if str(e).strip()
+                                  else type(e).__name__, self._secrets)
+                if self._in_write or attempt == 2:
+                    raise self._lost(f"lost the connection to the server ({first})", sql
+                                     ) from None
+        raise AssertionError("unreachable")
 
     def rows(self, sql: str, params=()) -> list[tuple]:
-        cur = self.conn.execute(sql.replace("?", "%s"), params)
-        return cur.fetchall() if cur.description else []
+        return self._statement(sql, params)
 
     def run(self, sql: str, params=()) -> None:
-        self.conn.execute(sql.replace("?", "%s"), params)
+        self._statement(sql, params)
 
     @contextmanager
     def write(self):
-        with self.conn.transaction():
+        # BEGIN runs as a statement outside the transaction: a connection lost since the last
+        # statement is made again here, before anything of the write is sent
+        self._statement("BEGIN")
+        self._in_write = True
+        try:
             if self.has_table("mapstore_info"):
                 self.run("SELECT value FROM mapstore_info WHERE key = 'schema' FOR UPDATE")
             else:   # the store is being made: an advisory lock keeps two inits apart
                 self.run("SELECT pg_advisory_xact_lock(1835102323)")
             yield
+        except BaseException:
+            self._in_write = False
+            self._rollback()
+            raise
+        try:
+            self._statement("COMMIT")
+        finally:
+            self._in_write = False
+
+    def _rollback(self) -> None:
+        """Undo the write; on a lost connection there is nothing to undo (the server drops an
+        unfinished transaction with its connection), and the write's own error is the one to
+        tell."""
+        if self.conn.closed:
+            return
+        try:
+            self._bounded("ROLLBACK")
+        except (self._psycopg.Error, StoreError):
+            pass
 
     def has_table(self, name: str) -> bool:
         return bool(self.rows("SELECT to_regclass(?) IS NOT NULL", (name,))[0][0])

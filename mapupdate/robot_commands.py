@@ -18,7 +18,7 @@ from evaluation import case_folder, edited_world
 from gridmap import MapUpdatingError, load_map, save_map
 from gridmap.metrics import compare_maps
 from mapstore import StoreError, open_store, report, spool
-from mapstore.backends import is_url
+from mapstore.backends import is_url, redacted
 from mapstore.png import write_diff_png
 from robot import logmap, replay
 from robot.outputs import check_outputs, map_files, map_inputs
@@ -133,10 +133,15 @@ def _open_to_start(args):
     """The store a session starts from. A missing or empty one is made only when --map gives
     the map it starts from: a mistyped --store names itself and leaves nothing behind."""
     target = args.store
-    if args.map is None and not is_url(target) and not Path(target).exists():
-        raise StoreError(f"{target}: no map store there, so it holds no approved map yet; "
-                         "give --map to start it (nothing was made)")
-    return open_store(target, create=args.map is not None)
+    if args.map is not None:
+        return open_store(target, create=True)
+    try:
+        return open_store(target)
+    except StoreError as e:       # the store's own refusals (a misspelt URL, ...) stand
+        if is_url(target) or Path(target).exists() or "no map store there" not in str(e):
+            raise
+    raise StoreError(f"{redacted(target)}: no map store there, so it holds no approved map "
+                     "yet; give --map to start it (nothing was made)")
 
 
 # the exit code of update and store push when a session's map waits in the spool
@@ -446,14 +451,27 @@ def _store_tag(st, args) -> list[str]:
 def _store_review(st, args) -> list[str]:
     number = (st.approve if args.action == "approve" else st.reject)(args.version, args.note)
     done = {"approve": "approved", "reject": "rejected"}[args.action]
+    if st.merged is not None:           # a sibling of the latest: merged with it
+        n = len(st.conflicts(st.merged))
+        return [f"v{number} {done}, merged with the latest as v{st.merged} ({n} conflict"
+                f"{'s' * (n != 1)}); robots now start from v{st.merged}"]
     return [f"v{number} {done}" + ("; robots now start from it"
                                            if number == st.latest() else "")]
+
+
+def _store_show(st, args) -> list[str]:
+    v = st.version(args.version)
+    lines = report.show_lines(v)
+    conflicts = st.conflicts(v.number)
+    if conflicts is not None:
+        lines += report.conflict_lines(conflicts, v.shape)
+    return lines
 
 
 STORE_ACTIONS = {
     "init": _store_init,
     "log": lambda st, args: report.log_lines(st.log(), st.name, st.require_approval),
-    "show": lambda st, args: report.show_lines(st.version(args.version)),
+    "show": _store_show,
     "diff": _store_diff,
     "export": _store_export,
     "rollback": lambda st, args: [f"v{st.rollback(args.version)}: a copy of "

@@ -339,4 +339,18 @@ def test_store_log_shows_the_merge_and_its_conflicts(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "v2+v3" in out
     assert "merge of v3 into v2 (base v1; 6 conflicts to theirs)" in out
+    assert main(["store", "show", "4", "--store", path]) == 0
+    out = capsys.readouterr().out
+    assert "6 cells changed in different ways on the two sides" in out
+    rows = [line.split() for line in out.splitlines() if line.strip().startswith(("30 ", "31 "))]
+    assert len(rows) == 6 and all(r[2:] == ["unk", "free", "occ", "occ"] for r in rows)
+    # review on: approving a sibling says it was merged
+    with open_store(path) as s:
+        s.set_require_approval(True)
+        s.commit(with_cells(s.get(4), slice(5, 7), slice(5, 9), OCCUPIED), 4, {"robot": "r1"})
+        s.commit(with_cells(s.get(4), slice(20, 22), slice(5, 9), OCCUPIED), 4, {"robot": "r2"})
+    assert main(["store", "approve", "5", "--store", path]) == 0
+    assert main(["store", "approve", "6", "--store", path]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == \
+        "v6 approved, merged with the latest as v7 (0 conflicts); robots now start from v7"
     assert cells.changes_between(base.data, base.data).counts()["cells_changed"] == 0

@@ -71,7 +71,7 @@ def _full_target(target) -> str:
 
 def target_name(target) -> str:
     """The target as an entry keeps it and messages show it: never a password."""
-    return redacted(str(target)) if is_url(target) else _full_target(target)
+    return redacted(_full_target(target))
 
 
 def target_key(target) -> str:

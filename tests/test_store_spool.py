@@ -270,6 +270,9 @@ def test_update_with_a_missing_store_and_no_map_makes_nothing(room, capsys):
     assert err == f"mapupdate update: error: {target}: no map store there, so it holds no " \
                   "approved map yet; give --map to start it (nothing was made)\n"
     assert sorted(p.name for p in room.iterdir()) == ["gone.log", "map.pgm", "map.yaml", "tmp"]
+    # a target that is no store's URL is the store's to refuse, its password never shown
+    code, out, err = update(capsys, room, "postgresq://me:s3cret@127.0.0.1/maps")
+    assert code == 2 and "unknown scheme" in err and "s3cret" not in err
 
 
 STUCK = """

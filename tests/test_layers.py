@@ -35,8 +35,9 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation", "mapstore"}),
     ("mapstore", {"gridmap"}),
     # (scenarios/__main__.py: ``python -m scenarios`` is the command line)
+    # (and the map store, for the fleet's store mode: robots committing as live nodes do)
     ("scenarios", {"gridmap", "sim", "updater", "localization", "evaluation", "robotlogs",
-                   "robot", "mapupdate"}),
+                   "robot", "mapupdate", "mapstore"}),
     ("studies", {"gridmap", "sim", "robot", "scenarios"}),
     ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "robot", "scenarios",
                    "studies", "sim", "mapstore"})])

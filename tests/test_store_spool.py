@@ -3,7 +3,7 @@ commit fails (a store's write lock held too long, a PostgreSQL server stopped) i
 and exits 3; ``mapupdate store push`` commits it once the store is back, once however often it
 is pushed; the next update pushes the spool first; a mistyped store is not made; a killed
 update's working folder is removed by the next. The failures are real: an SQLite lock held by
-another connection, a PostgreSQL server stopped while the session runs."""
+another connection, a PostgreSQL server stopped or paused (SIGSTOP) while the session runs."""
 
 from __future__ import annotations
 
@@ -261,6 +261,29 @@ def test_a_postgresql_server_stopped_during_the_session(room, capsys, monkeypatc
                           f"as v4 (0 conflicts)\n"
         n = len(s.log())
     assert push(capsys, room, target)[0] == 0 and versions(target)[-1] == n
+
+
+def test_a_paused_postgresql_server_keeps_the_session_within_seconds(room, capsys, monkeypatch,
+                                                                     postgres):
+    srv, why = postgres
+    if srv is None:
+        pytest.skip(f"no PostgreSQL server: {why}")
+    target = started(srv.new_database(), room)
+    real = robot_commands._update
+
+    def then_pause(*a, **k):           # the session runs, then the server stops answering
+        done = real(*a, **k)
+        srv.pause()
+        return done
+    monkeypatch.setattr(robot_commands, "_update", then_pause)
+    try:
+        code, out, err = update(capsys, room, target)
+    finally:
+        srv.resume()
+    monkeypatch.undo()
+    assert code == 3 and "no answer" in err, err
+    [entry] = spooled(room)
+    assert push(capsys, room, target) == (0, f"pushed {entry.name}: v2 (parent v1; approved)\n")
 
 
 def test_update_with_a_missing_store_and_no_map_makes_nothing(room, capsys):

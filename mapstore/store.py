@@ -17,6 +17,7 @@ import functools
 import json
 import re
 import time
+import uuid
 import zlib
 from dataclasses import dataclass, field
 
@@ -26,7 +27,7 @@ import numpy as np
 from gridmap import OccupancyGrid
 
 from . import cells, history, merge
-from .backends import StoreError, connect, database_errors
+from .backends import ConnectionLost, StoreError, connect, database_errors
 from .text import NAME_LIMIT, NOTE_LIMIT, check_text
 
 SCHEMA_VERSION = "2"
@@ -69,6 +70,9 @@ UID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
 # how many times a commit plans outside the write lock before it plans under it (each time
 # another writer moved the latest version while it planned)
 PLAN_TRIES = 3
+# how many times a commit is written when its connection is lost inside the write (the
+# database reconnects first; the commit's id finds a write that did land)
+LOST_TRIES = 3
 
 
 @dataclass(frozen=True)
@@ -221,8 +225,21 @@ class Store:
                              "digits, '.', '_', ':' or '-')")
         _check_meta(self.name, meta or {})
         meta_text = _json(self.name, meta or {})
+        # every commit has an id, so that one whose connection was lost inside its write can
+        # be written again without being written twice
+        uid = uuid.uuid4().hex if uid is None else str(uid)
+        for attempt in range(LOST_TRIES):
+            try:
+                return self._commit(grid, parent, meta_text, status, uid)
+            except ConnectionLost:
+                if attempt + 1 == LOST_TRIES:
+                    raise
+        raise AssertionError("unreachable: the last try raises")
+
+    def _commit(self, grid, parent, meta_text, status, uid) -> int:
         self.merged = None
-        if uid is not None and (done := self._by_uid(uid)) is not None:
+        if (done := self._by_uid(uid)) is not None:
+            self.merged = self._merge_of(done)
             return done
         parent = None if parent is None else self.resolve(parent)
         # the slow part, reading, merging and packing maps, is done before the lock is taken;
@@ -232,7 +249,8 @@ class Store:
         for attempt in range(PLAN_TRIES):
             with self.db.write():
                 self._at("locked")
-                if uid is not None and (done := self._by_uid(uid)) is not None:
+                if (done := self._by_uid(uid)) is not None:
+                    self.merged = self._merge_of(done)
                     return done
                 if (self._root(), self.latest()) != (plan.root, plan.latest):
                     if attempt + 1 < PLAN_TRIES:
@@ -326,6 +344,12 @@ class Store:
 
     def _root(self) -> int | None:
         found = self.db.rows("SELECT MIN(version) FROM mapstore_versions")[0][0]
+        return None if found is None else int(found)
+
+    def _merge_of(self, number: int) -> int | None:
+        """The merge a commit made (its second parent is the commit), if it made one."""
+        found = self.db.rows("SELECT MIN(version) FROM mapstore_versions WHERE merge_parent = ?",
+                             (number,))[0][0]
         return None if found is None else int(found)
 
     def _by_uid(self, uid: str) -> int | None:

@@ -145,6 +145,34 @@ def test_a_connection_lost_inside_a_write_is_connection_lost(server):
         db.close()
 
 
+def test_a_commit_whose_connection_is_lost_inside_its_write_is_written_once(server):
+    """The server restarts while a commit writes its rows (and, the second time, just after
+    its transaction committed, before the answer is read): the store writes the commit again
+    on a new connection, and its id keeps it from being written twice."""
+    with open_store(server.new_database(), create=True) as store:
+        store.commit(grid(1), None, {})
+        for step, expect in (("version row", 2), ("committed", 3)):
+            fired = []
+
+            def hook(at, step=step, fired=fired):
+                if at == step and not fired:
+                    fired.append(at)
+                    server.restart(0.3)
+            store.hook = hook
+            if step == "committed":
+                # the answer lost after the commit: as a lost answer looks to the store
+                def hook(at, fired=fired):
+                    if at == "committed" and not fired:
+                        fired.append(at)
+                        raise ConnectionLost("lost", at_commit=True)
+                store.hook = hook
+            assert store.commit(grid(expect), expect - 1, {"k": expect}) == expect
+            assert fired
+            store.hook = None
+        assert [v.number for v in store.log()] == [1, 2, 3]
+        assert np.array_equal(store.get(3).data, grid(3).data)
+
+
 def test_a_server_down_longer_than_the_window_is_said_within_it(monkeypatch, server):
     monkeypatch.setattr(backends, "RECONNECT_WINDOW", 3.0)
     store = open_store(server.new_database(), create=True)

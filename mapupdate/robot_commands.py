@@ -411,7 +411,7 @@ def store_files(args) -> list[Path]:
     """The files of ``--store`` that no output may be: an SQLite store and its journal files
     (a PostgreSQL URL has none here)."""
     target = getattr(args, "store", None)
-    if target is None or str(target).startswith(("postgresql://", "postgres://")):
+    if target is None or is_url(str(target)):
         return []
     return [Path(f"{target}{suffix}") for suffix in ("", "-wal", "-shm", "-journal")]
 

@@ -194,7 +194,11 @@ import os
 while not os.path.exists(go):
     time.sleep(0.01)
 out = []
+marks = {}
+def hook(step):
+    marks[step] = time.perf_counter()
 with open_store(target) as s:
+    s.hook = hook
     for c in range(commits):
         parent = s.latest()
         start = s.get(parent)
@@ -211,6 +215,7 @@ with open_store(target) as s:
         dt = time.perf_counter() - t0
         merged = s.merged
         out.append({"commit_s": dt, "merged": merged is not None,
+                    "lock_s": marks["committed"] - marks["locked"],
                     "conflicts": len(s.conflicts(merged)) if merged else 0})
 print(json.dumps(out), flush=True)
 """
@@ -224,13 +229,13 @@ def fleet_table(sizes: list[int], commits: int, side: int) -> int:
         return 1
     print(f"{side} x {side} cells at 5 cm, {commits} sessions a robot, PostgreSQL 15, fsync on")
     print("| robots | commits | commits/s | merged | commit s (no merge) | commit s (merge), "
-          "median / p90 | conflicts per merge | cells lost |")
-    print("|---|---|---|---|---|---|---|---|")
+          "median / p90 | lock held s, median / p90 | conflicts per merge | cells lost |")
+    print("|---|---|---|---|---|---|---|---|---|")
     try:
         for n in sizes:
             row = fleet_run(srv, n, commits, side)
             print(f"| {n} | {row['commits']} | {row['per_s']:.2f} | {row['merged']} | "
-                  f"{row['plain_s']} | {row['merge_s']} | {row['conflicts']} | "
+                  f"{row['plain_s']} | {row['merge_s']} | {row['lock_s']} | {row['conflicts']} | "
                   f"{row['lost']} |", flush=True)
     finally:
         srv.stop()
@@ -260,6 +265,7 @@ def fleet_run(srv, n: int, commits: int, side: int) -> dict:
         return (f"{statistics.median(xs):.2f} / {np.percentile(xs, 90):.2f}" if xs else "-")
     return {"commits": len(rows), "per_s": len(rows) / wall, "merged": len(merged),
             "plain_s": spread(plain), "merge_s": spread([r["commit_s"] for r in merged]),
+            "lock_s": spread([r["lock_s"] for r in rows]),
             "conflicts": f"{statistics.median(r['conflicts'] for r in merged):.0f}"
             if merged else "-", "lost": lost}
 

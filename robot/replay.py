@@ -25,7 +25,7 @@ Where the poses come from (``pose_source``):
   given, else ``"localizer"``.
 
 What updates the map (``method``): the paper's updater (the default), or ``fuse`` / ``hybrid``
-of :mod:`scenarios.methods`, behind the same gate and pose check. Only the paper's updater has
+of :mod:`robot.methods`, behind the same gate and pose check. Only the paper's updater has
 a state to save and load.
 
 Scan times: the gate and the pose smoother need time to pass between scans. A log whose stamps

@@ -43,7 +43,7 @@ class RunOptions:
     # the report's comparison columns (only when the run's profile is not the paper's)
     compare_paper: bool = True
     resume: bool = False       # continue the run in ``out`` after its last finished session
-    method: str = "paper"      # what updates the map: one of scenarios.methods.METHODS
+    method: str = "paper"      # what updates the map: one of robot.methods.METHODS
 
 
 class SessionObserver(Protocol):

@@ -109,7 +109,7 @@ class UpdateSession:
     ``localizer_seed``: both localisers use it, as the evaluation asks. ``localizer_config``:
     by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas). ``pose_check``: the
     safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
-    ``method``: what updates the map, a name of ``scenarios.methods.METHODS`` (default the
+    ``method``: what updates the map, a name of ``robot.methods.METHODS`` (default the
     paper's updater); ``self.updater`` is that method.
     """
 

@@ -7,7 +7,7 @@ The spec (YAML)::
 
     scenarios: [aws_small_warehouse, {generate: {seeds: [1, 2, 3], size: [30, 20], sessions: 3}}]
     seeds: [7, 8]                        # run seeds (default: each scenario's own)
-    methods: [paper, hybrid, fuse, remap, none]  # scenarios.methods.METHODS (default: paper)
+    methods: [paper, hybrid, fuse, remap, none]  # robot.methods.METHODS (default: paper)
     quick: true                          # the quick routes of `mapupdate run --quick`
     sessions: 3                          # the first K sessions only (default: all)
     profile: robot                       # robot (default) or paper, or a list of both to compare
@@ -20,7 +20,7 @@ before any run starts. Each run is ``runner.run_scenario`` with the options ``ma
 would give it, in its own folder ``DIR/runs/<key>/``; when it ends, its rows go atomically to
 ``DIR/runs/<key>/result.json``, which marks it finished: the same command run again skips it,
 so a killed sweep resumes. Generated scenarios are written once to ``DIR/scenarios/``. At the
-end ``scenarios.study_report`` writes ``DIR/results.csv``, ``DIR/summary.md`` and the box
+end ``studies.study_report`` writes ``DIR/results.csv``, ``DIR/summary.md`` and the box
 plots.
 
 A study folder belongs to one spec, as a run folder belongs to one run: a sweep of another

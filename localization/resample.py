@@ -7,11 +7,10 @@ indices as there are weights, and run a Python loop per particle (systematic and
 the first particle whose cumulative weight exceeds the position) but draws its random numbers
 from the localiser's own Generator, vectorises the search with ``np.searchsorted`` and takes the
 output count as an argument, which KLD-sampling needs. The tests check it index for index against
-filterpy fed the same random numbers. ``filterpy_indices`` is the other way (run filterpy itself
-under a temporarily seeded, then restored, global state): it is kept as the reference the
-benchmark measures against. Residual resampling deliberately differs: filterpy 2.0 takes the
-fractional parts as ``weights - floor(N * weights)``, which is not a distribution; here they are
-``N * weights - floor(N * weights)`` (Liu and Chen 1998).
+filterpy fed the same random numbers; filterpy itself is a dependency of the tests and the
+benchmark only, never imported here. Residual resampling deliberately differs: filterpy 2.0 takes
+the fractional parts as ``weights - floor(N * weights)``, which is not a distribution; here they
+are ``N * weights - floor(N * weights)`` (Liu and Chen 1998).
 """
 
 from __future__ import annotations
@@ -87,20 +86,6 @@ def resample_indices(weights, count: int, rng: np.random.Generator,
     else:
         positions = rng.random(count)
     return np.searchsorted(c, positions, side="right")
-
-
-def filterpy_indices(weights, rng: np.random.Generator, scheme: str = "systematic") -> np.ndarray:
-    """filterpy's own resampler, as many indices as weights, made reproducible by seeding the
-    global state from ``rng`` for the call and restoring it afterwards (nothing leaks)."""
-    from filterpy import monte_carlo
-
-    fn = getattr(monte_carlo, f"{scheme}_resample")
-    saved = np.random.get_state()
-    try:
-        np.random.seed(int(rng.integers(2**32)))
-        return np.asarray(fn(normalise(weights)), dtype=np.int64)
-    finally:
-        np.random.set_state(saved)
 
 
 class Scratch:

@@ -12,10 +12,11 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan
 from localization import _kernels as k
 from localization.config import LocalizationError
 from localization.motion import motion_sigmas, odometry_delta, sample_motion
-from localization.resample import (KldParameters, Recovery, effective_fraction, filterpy_indices,
-                                   histogram_keys, kld_resample, normalise, resample_indices,
-                                   temper)
+from localization.resample import (KldParameters, Recovery, effective_fraction, histogram_keys,
+                                   kld_resample, normalise, resample_indices, temper)
 from localization.sensor import LikelihoodField, likelihood_field, select_beams
+
+from filterpy_reference import filterpy_indices
 
 
 def wrap(a):

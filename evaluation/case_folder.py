@@ -19,10 +19,10 @@ from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, P
                      load_map, save_map)
 from gridmap.atomic import write_atomically
 from gridmap.map_io import read_map_yaml
+from gridmap.masks import near
 
 from .edited_world import (CARMEN_RANGE_MIN, CASE_FILES, FEW_VIEWS, FLASER_NO_RETURN, TRUTH_MASKS,
                            ZIP_TIME, Case, CaseError)
-from .scores import near
 
 __all__ = ["CASE_FILES", "case_lines", "case_record", "check_case_dir", "load_case", "log_text",
            "score_case", "score_lines", "write_case", "write_scores"]

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, OccupancyGrid, Pose2D
+from gridmap.masks import near
 
 OBSERVATION_RANGE = 10.0  # [m] beams observe cells up to this distance
 MIN_OBSERVATIONS = 7      # the updater's decision threshold T
@@ -19,17 +20,6 @@ MIN_OBSERVATIONS = 7      # the updater's decision threshold T
 
 def _cells(m) -> np.ndarray:
     return m.data if isinstance(m, OccupancyGrid) else np.asarray(m)
-
-
-def near(mask: np.ndarray) -> np.ndarray:
-    """Cells with a True cell within one cell (8-neighbourhood, itself included)."""
-    out = mask.copy()
-    out[1:, :] |= mask[:-1, :]
-    out[:-1, :] |= mask[1:, :]
-    tmp = out.copy()
-    out[:, 1:] |= tmp[:, :-1]
-    out[:, :-1] |= tmp[:, 1:]
-    return out
 
 
 class ObservationCounter:

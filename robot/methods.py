@@ -47,11 +47,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from evaluation.scores import near
 from gridmap import (FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid, Pose2D, PoseVerdict,
                      Scan)
 from gridmap.distance import distance_to_occupied
 from gridmap.mapping import LogOddsMapper, LogOddsParams
+from gridmap.masks import near
 from gridmap.suggest import did_you_mean
 from updater import BeamVerdict, MapUpdater, ScanReport, ScanStatus, UpdaterConfig
 from updater.gating import SKIPPED_OFF_MAP, Gate

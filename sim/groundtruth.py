@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from gridmap.masks import near
 
 from . import geometry as geo
 
@@ -96,15 +97,5 @@ def rasterise(frame: OccupancyGrid, boxes: np.ndarray, circles: np.ndarray, boun
     flood_fill4(inside & ~cover, int(r0), int(c0), free)
     data = np.full(frame.shape, UNKNOWN, np.int8)
     data[free] = FREE
-    data[cover & _dilate8(free)] = OCCUPIED
+    data[cover & near(free)] = OCCUPIED
     return frame.with_data(data)
-
-
-def _dilate8(mask: np.ndarray) -> np.ndarray:
-    out = mask.copy()
-    p = np.pad(mask, 1)
-    h, w = mask.shape
-    for dr in (-1, 0, 1):
-        for dc in (-1, 0, 1):
-            out |= p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-    return out

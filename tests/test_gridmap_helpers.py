@@ -1,7 +1,10 @@
-"""The helpers every package shares: the "did you mean" hint and the atomic file writer."""
+"""The helpers every package shares: the "did you mean" hint, the atomic file writer and the
+one-cell dilation of a mask."""
 
+import numpy as np
 import pytest
 
+from gridmap.masks import near
 from gridmap.suggest import did_you_mean
 
 
@@ -92,3 +95,18 @@ def test_write_with_numpy_and_an_interrupted_rename(tmp_path, monkeypatch):
     with np.load(path) as z:
         assert z["x"].tolist() == [0, 1, 2]
     assert _leftovers(tmp_path) == []
+
+
+def test_near_is_the_mask_dilated_by_a_3_by_3_square():
+    rng = np.random.default_rng(3)
+    for shape in [(1, 1), (1, 7), (6, 1), (9, 13)]:
+        mask = rng.random(shape) < 0.1
+        kept = mask.copy()
+        padded = np.pad(mask, 1)
+        h, w = shape
+        want = np.zeros(shape, bool)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                want |= padded[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+        assert np.array_equal(near(mask), want)
+        assert np.array_equal(mask, kept)

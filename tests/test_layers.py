@@ -32,7 +32,7 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
 @pytest.mark.parametrize("package, allowed", [
     ("gridmap", set()), ("updater", {"gridmap"}), ("localization", {"gridmap"}),
     ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"}),
-    ("robot", {"gridmap", "updater", "localization", "robotlogs", "evaluation", "mapstore"}),
+    ("robot", {"gridmap", "updater", "localization", "robotlogs", "mapstore"}),
     ("mapstore", {"gridmap"}),
     # (scenarios/__main__.py: ``python -m scenarios`` is the command line)
     # (and the map store, for the fleet's store mode: robots committing as live nodes do)

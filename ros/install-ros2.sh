@@ -20,6 +20,10 @@ msgs() {
     echo "could not install colcon (see $venv.log): the package build test will skip"
 }
 if [ -x "$venv/bin/mapupdate" ] && [ "$venv/bin/mapupdate" -nt pyproject.toml ]; then
+  # a node with a PostgreSQL store needs psycopg (an environment made before it was asked for)
+  "$venv/bin/python" -c 'import psycopg' 2>/dev/null ||
+    "$venv/bin/pip" install --quiet 'psycopg[binary]>=3.1' >>"$venv.log" 2>&1 ||
+    echo "could not install psycopg into $venv (see $venv.log): the ROS 2 store tests will skip"
   msgs
   exit 0
 fi
@@ -29,6 +33,6 @@ if ! "$py" -c 'import sys, platform; sys.exit(not (sys.version_info[:2] == (3, 1
 fi
 echo "installing ROS 2 Jazzy's wheels into $venv (the live ROS 2 node and its tests)"
 { "$py" -m venv "$venv" && "$venv/bin/pip" install --quiet --upgrade pip &&
-  "$venv/bin/pip" install --quiet -e '.[ros2]' 'cyclonedds>=0.10'; } >"$venv.log" 2>&1 \
+  "$venv/bin/pip" install --quiet -e '.[ros2,store]' 'cyclonedds>=0.10'; } >"$venv.log" 2>&1 \
   && touch "$venv/bin/mapupdate" && msgs \
   || echo "could not install the ROS 2 wheels (see $venv.log): the ROS 2 tests will skip"

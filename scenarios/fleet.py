@@ -41,6 +41,7 @@ from gridmap.map_io import save_map
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck, PoseCheckConfig
 from robot.pipeline import RobotPipeline
+from robot.ros_common.store_link import rebased
 from robot.robot_config import POSE_CHECK_ON
 from sim.fleet import FleetMember, FleetWorld
 from updater import MapUpdater, UpdaterConfig
@@ -314,8 +315,7 @@ class FleetSession:
         from mapstore import open_store
         robot, t0 = self.robots[k], time.perf_counter()
         updated = robot.updater.updated_map()
-        if np.array_equal(updated.data, robot.updater.inner.reference_map.data
-                          if self.board is not None else robot.updater.reference_map.data):
+        if np.array_equal(updated.data, self._reference_of(robot).data):
             return self._poll(k)                # nothing new to commit
         with open_store(self.options.store) as store:
             number = store.commit(updated, robot.version, {
@@ -332,14 +332,23 @@ class FleetSession:
         robot.adopt(mine, self.config)
         self.store_s += time.perf_counter() - t0
 
+    def _reference_of(self, robot) -> OccupancyGrid:
+        inner = robot.updater.inner if self.board is not None else robot.updater
+        return inner.reference_map
+
     def _poll(self, k: int) -> None:
         from mapstore import open_store
         robot, t0 = self.robots[k], time.perf_counter()
         with open_store(self.options.store) as store:
             latest = store.latest()
             if latest is not None and latest > robot.version:
+                grid, updated = store.get(latest), robot.updater.updated_map()
+                if not np.array_equal(updated.data, self._reference_of(robot).data):
+                    # changes not committed yet: laid on the newer version, as the node does
+                    grid = grid.with_data(rebased(store.get(robot.version).data, grid.data,
+                                                  updated.data))
                 robot.version = latest
-                robot.adopt(store.get(latest), self.config)
+                robot.adopt(grid, self.config)
                 self.store_counts["taken"] += 1
         self.store_s += time.perf_counter() - t0
 

@@ -11,6 +11,7 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,33 +20,9 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from mapstore import StoreError, cells, merge, open_store
 from mapupdate import main
 
-try:
-    import postgres_tools
-except ImportError:  # tests collected as a package
-    from tests import postgres_tools
-
-from pathlib import Path
-
 DATA = Path(__file__).parent / "data"
 VALUES = (FREE, OCCUPIED, UNKNOWN)
-
-
-@pytest.fixture(scope="module")
-def postgres():
-    srv, why = postgres_tools.server()
-    yield srv, why
-    if srv is not None:
-        srv.stop()
-
-
-@pytest.fixture(params=("sqlite", "postgresql"))
-def target(request, tmp_path, postgres):
-    if request.param == "sqlite":
-        return str(tmp_path / "maps.db")
-    srv, why = postgres
-    if srv is None:
-        pytest.skip(f"no PostgreSQL server: {why}")
-    return srv.new_database()
+# ``target``: an SQLite file, then a database on this file's PostgreSQL server (conftest.py)
 
 
 def room() -> OccupancyGrid:
@@ -354,3 +331,36 @@ def test_store_log_shows_the_merge_and_its_conflicts(tmp_path, capsys):
     assert capsys.readouterr().out.splitlines()[-1] == \
         "v6 approved, merged with the latest as v7 (0 conflicts); robots now start from v7"
     assert cells.changes_between(base.data, base.data).counts()["cells_changed"] == 0
+
+
+# --- a live node's link: a newer version does not throw away a session ------------------------
+def test_a_node_taking_up_a_newer_version_keeps_its_uncommitted_changes(target):
+    """A node has freed box 1 and not committed; another robot's version (box 2 freed)
+    appears. The node goes on from that version with its own change laid on it, and its
+    commit, made on the newer version, keeps both."""
+    from robot.ros_common.store_link import StoreLink
+
+    base = room()
+    with open_store(target, create=True) as s:
+        s.commit(base, None, {"method": "import"})
+    link = StoreLink(target, robot="r1", poll_period=10.0)
+    assert np.array_equal(link.start(None).data, base.data) and link.version == 1
+    mine = with_cells(base, slice(10, 14), slice(10, 16), FREE)
+    with open_store(target) as s:
+        s.commit(with_cells(base, slice(25, 29), slice(30, 36), FREE), 1, {"robot": "r2"})
+    number, grid = link.newer(force=True, session=(base, mine))
+    both = with_cells(mine, slice(25, 29), slice(30, 36), FREE)
+    assert number == 2 and link.version == 2 and np.array_equal(grid.data, both.data)
+    assert link.newer(force=True, session=(grid, grid)) is None       # nothing newer now
+    # the node commits what it has: a child of v2 with its own box, no merge needed
+    number, status, merged = link.commit(both, {"method": "robot"})
+    assert (number, status, merged) == (3, "approved", None)
+    with open_store(target) as s:
+        assert s.version(3).parent == 2 and s.version(3).counts["cells_freed"] == 24
+        assert np.array_equal(s.get(s.latest()).data, both.data)
+    # without a session (or one with no changes) the newer version is taken as it is
+    with open_store(target) as s:
+        s.commit(with_cells(both, slice(5, 8), slice(40, 44), OCCUPIED), 3, {"robot": "r2"})
+    number, grid = link.newer(force=True, session=(both, both))
+    assert number == 4 and np.array_equal(grid.data, with_cells(both, slice(5, 8),
+                                                                slice(40, 44), OCCUPIED).data)

@@ -352,7 +352,8 @@ class MapUpdaterNode:
         if self.store is None or self.pipeline is None:
             return
         try:
-            newer = self.store.newer()
+            updater = self.pipeline.updater
+            newer = self.store.newer(session=(updater.reference_map, updater.updated_map()))
         except MapUpdatingError as e:
             self._skip("map store unusable", e)
             return

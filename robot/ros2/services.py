@@ -153,7 +153,8 @@ def take_newer_version(node) -> None:
     if node.store is None or node.pipeline is None:
         return
     try:
-        newer = node.store.newer()
+        updater = node.pipeline.updater
+        newer = node.store.newer(session=(updater.reference_map, updater.updated_map()))
     except MapUpdatingError as e:
         return node._skip("map store unusable", e)
     if newer is not None:

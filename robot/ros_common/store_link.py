@@ -10,8 +10,10 @@ import time
 import uuid
 from importlib import metadata
 
+import numpy as np
+
 from gridmap import OccupancyGrid
-from mapstore import StoreError, open_store
+from mapstore import StoreError, merge, open_store
 
 
 def _project_version() -> str:
@@ -79,9 +81,17 @@ class StoreLink:
         return True, (f"committed v{number}, pending review; the node keeps v{self.version} "
                       "until a newer one is approved"), pipeline.updater.reference_map
 
-    def newer(self, force: bool = False) -> tuple[int, OccupancyGrid] | None:
+    def newer(self, force: bool = False,
+              session: tuple[OccupancyGrid, OccupancyGrid] | None = None
+              ) -> tuple[int, OccupancyGrid] | None:
         """A newer approved version than the node's, looked for at most every
-        ``poll_period`` seconds (``force``: now)."""
+        ``poll_period`` seconds (``force``: now): (its number, the map the node goes on from).
+
+        ``session``: (the node's reference, its updated map). When the session has changed
+        cells it has not committed, they are not thrown away: the map the node goes on from is
+        the newer version with the session's changes laid on it (the store's three-way merge,
+        the session winning a conflict as the commit would), and the node's version becomes
+        the newer one, so that its next commit is counted and merged against it."""
         now = time.monotonic()
         if not force and now - self._checked < self.poll_period:
             return None
@@ -90,8 +100,20 @@ class StoreLink:
             latest = store.latest()
             if latest is None or (self.version is not None and latest <= self.version):
                 return None
+            grid = store.get(latest)
+            if session is not None and self.version is not None:
+                reference, updated = session
+                if not np.array_equal(reference.data, updated.data):
+                    grid = grid.with_data(rebased(store.get(self.version).data, grid.data,
+                                                  updated.data))
             self.version = latest
-            return latest, store.get(latest)
+            return latest, grid
+
+
+def rebased(base, newer, session):
+    """``session``'s changes against ``base`` laid on ``newer`` (three-way, the session
+    winning a conflict)."""
+    return merge.three_way(base, newer, session, theirs_wins=True).data
 
 
 __all__ = ["StoreError", "StoreLink"]

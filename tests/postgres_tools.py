@@ -66,6 +66,12 @@ class Server:
             os.kill(pid, signal.SIGCONT)
 
     def stop(self) -> None:
+        """Stop the server at once (resumed first: a paused one would not hear pg_ctl) and
+        remove its folder."""
+        try:
+            self.resume()
+        except (OSError, ValueError, IndexError):  # not running: no postmaster.pid to read
+            pass
         subprocess.run(self.runas + [str(self.bindir / "pg_ctl"), "-D", str(self.folder / "data"),
                                      "-m", "immediate", "stop"], capture_output=True, timeout=60)
         shutil.rmtree(self.folder, ignore_errors=True)

@@ -10,7 +10,6 @@ import os
 import random
 import signal
 import subprocess
-import sys
 import textwrap
 import time
 from pathlib import Path
@@ -169,6 +168,3 @@ def wait_until(ready, timeout: float, what: str) -> None:
             return
         time.sleep(0.2)
     raise TimeoutError(f"{what} did not happen in {timeout} s")
-
-
-sys.path.insert(0, str(ROOT / "tests"))

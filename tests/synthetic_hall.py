@@ -17,10 +17,7 @@ import numpy as np
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan
 
-try:
-    import synthetic_room as room
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as room
+import synthetic_room as room
 
 Rect, Circle = room.Rect, room.Circle
 RES = 0.05

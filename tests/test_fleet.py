@@ -18,10 +18,7 @@ from scenarios.session import session_seeds
 from sim.fleet import FleetMember, FleetWorld
 from updater import ScanStatus, UpdaterConfig
 
-try:
-    import tiny_room
-except ImportError:  # pragma: no cover - run from the repository root
-    from tests import tiny_room
+import tiny_room
 
 LIDAR = {"mount": [0.2, 0.0, 0.0], "fov_deg": 270, "beams": 271, "range_max": 10.0,
          "range_noise_std": 0.01, "rate_hz": 10}

@@ -18,10 +18,7 @@ from updater import MapUpdater, UpdaterConfig
 from updater.gating import (GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TURN_VIEWS,
                             Gate, bins_seen, directions_seen)
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 ROBOT = UpdaterConfig.profile("robot")
 BOX = world.Rect(6.4125, 5.1125, 7.0125, 5.9125)      # 0.6 x 0.8 m, 1.2 m ahead of the robot

@@ -18,10 +18,7 @@ from mapupdate import main
 from robot.replay import LogSource, Outputs, Placement, update_from_log
 from robotlogs.rosbag import write_bag
 
-try:
-    import test_logs_replay as room
-except ImportError:  # tests collected as a package
-    from tests import test_logs_replay as room
+import test_logs_replay as room
 
 CORNER_BOX = (7.5, 5.5)
 

@@ -28,10 +28,7 @@ from robotlogs.rosbag import write_bag
 from localization.confidence import PoseCheckConfig
 from robot.replay import LogSource, Outputs, Placement, update_from_log
 
-try:
-    import synthetic_hall as hall
-except ImportError:  # tests collected as a package
-    from tests import synthetic_hall as hall
+import synthetic_hall as hall
 
 SEEDS = [0, 1, 2, pytest.param(3, marks=pytest.mark.slow), pytest.param(4, marks=pytest.mark.slow)]
 DEFAULT, AS_RECORDED = None, 0.0      # smoothing window: update's default, or none

@@ -33,10 +33,7 @@ from robotlogs import log_observations
 from robot.logmap import _placed_scans, map_frame
 from robot.replay import LogSource, Outputs, update_from_log
 
-try:
-    from test_intel import figures
-except ImportError:  # tests collected as a package
-    from tests.test_intel import figures
+from test_intel import figures
 
 KILLIAN = Path(__file__).resolve().parents[2] / "shared/data/killian.clf.gz"
 

@@ -21,10 +21,7 @@ from robot.pipeline import RobotPipeline
 from robot.replay import LogSource, Outputs, Placement, update_from_log
 from updater import MapUpdater
 
-try:
-    import test_logs_replay as room
-except ImportError:  # tests collected as a package
-    from tests import test_logs_replay as room
+import test_logs_replay as room
 
 
 def read_tum(path):

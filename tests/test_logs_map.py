@@ -13,10 +13,7 @@ from robotlogs.rosbag import write_bag
 from mapupdate import main
 from robot.logmap import map_from_log
 
-try:
-    import test_logs_replay as room
-except ImportError:  # tests collected as a package
-    from tests import test_logs_replay as room
+import test_logs_replay as room
 
 
 @pytest.fixture(scope="module")

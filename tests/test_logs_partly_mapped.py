@@ -26,12 +26,8 @@ from robotlogs.rosbag import write_bag
 from robot.replay import LogSource, Outputs, update_from_log
 from updater import UpdaterConfig
 
-try:
-    import synthetic_hall as hall
-    from test_intel import frame_around
-except ImportError:  # tests collected as a package
-    from tests import synthetic_hall as hall
-    from tests.test_intel import frame_around
+import synthetic_hall as hall
+from test_intel import frame_around
 
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 SEEN = 7           # observations that make a formerly unknown cell count

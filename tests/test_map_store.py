@@ -23,36 +23,10 @@ from mapstore import StoreError, cells, open_store
 from mapstore.png import COLORS
 from mapupdate import main
 
-try:
-    import postgres_tools
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import postgres_tools
-    from tests import synthetic_room as world
+import synthetic_room as world
 
-BACKENDS = ("sqlite", "postgresql")
-
-
-@pytest.fixture(scope="module")
-def postgres():
-    srv, why = postgres_tools.server()
-    yield srv, why
-    if srv is not None:
-        srv.stop()
-
-
-def target_of(backend, tmp_path, postgres):
-    if backend == "sqlite":
-        return str(tmp_path / "maps.db")
-    srv, why = postgres
-    if srv is None:
-        pytest.skip(f"no PostgreSQL server: {why}")
-    return srv.new_database()
-
-
-@pytest.fixture(params=BACKENDS)
-def target(request, tmp_path, postgres):
-    return target_of(request.param, tmp_path, postgres)
+# ``target`` (an SQLite file, then a database on this file's PostgreSQL server) and
+# ``postgres`` (the server) are tests/conftest.py's
 
 
 def grid(seed: int, shape=(60, 90)) -> OccupancyGrid:
@@ -157,7 +131,7 @@ def test_a_sequence_of_commits_reviews_and_rollbacks_on_sqlite(tmp_path):
 
 
 def test_the_same_sequence_gives_the_same_results_on_sqlite_and_postgresql(tmp_path, postgres):
-    pg = target_of("postgresql", tmp_path, postgres)
+    pg = postgres.new_database()
     assert sequence(pg) == sequence(str(tmp_path / "maps.db"))
 
 

@@ -12,10 +12,7 @@ from robot.methods import METHODS, MethodError, check_method, make_method
 from robot.pipeline import RobotPipeline
 from updater import UpdaterConfig, MapMethod, MapUpdater
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 Rect = world.Rect
 REMOVED = Rect(4.9125, 5.1125, 6.1125, 5.9125)    # in the map, gone from the world

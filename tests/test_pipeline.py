@@ -15,10 +15,7 @@ from localization.confidence import PoseCheck
 from robot.pipeline import RobotPipeline
 from updater import MapUpdater, ScanStatus
 
-try:
-    import synthetic_room as world
-except ImportError:  # pragma: no cover - run from the repository root
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 MOUNT = Pose2D(0.2, 0.0, 0.0)                       # lidar 0.2 m ahead of the base

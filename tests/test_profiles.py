@@ -21,10 +21,7 @@ from robot.robot_config import (CLASSES, POSE_CHECK_ON, load_robot_config,
 from updater import MapUpdater, UpdaterConfig
 from updater import config as updater_config
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 ROOT = Path(__file__).resolve().parents[1]
 BOX = world.Rect(5.2, 5.2, 5.8, 5.8)      # in the map, gone from the room

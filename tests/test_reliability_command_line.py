@@ -20,16 +20,10 @@ from gridmap import OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan, load_map, sa
 from gridmap.mapping import LogOddsMapper
 from mapupdate import main
 
-try:
-    import ros2_tools
-    import synthetic_room as world
-    from test_reliability_files import BOX, flaser_lines
-    from test_reliability_hostile import BILLION_LAUGHS, refused, time_limit
-except ImportError:  # tests collected as a package
-    from tests import ros2_tools
-    from tests import synthetic_room as world
-    from tests.test_reliability_files import BOX, flaser_lines
-    from tests.test_reliability_hostile import BILLION_LAUGHS, refused, time_limit
+import ros2_tools
+import synthetic_room as world
+from test_reliability_files import BOX, flaser_lines
+from test_reliability_hostile import BILLION_LAUGHS, refused, time_limit
 
 START = Pose2D(8.5, 5.5, 1.5707963267948966)        # where the robot of the room's log starts
 

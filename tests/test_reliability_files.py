@@ -34,12 +34,8 @@ from robotlogs.records import LogError
 from robotlogs.text_lines import GZIP_MIN_BYTES, MAX_LINE_BYTES, LogLimits, bounds
 from updater import MapUpdater, UpdaterConfig
 
-try:
-    import synthetic_room as world
-    from test_reliability_hostile import refused, time_limit
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
-    from tests.test_reliability_hostile import refused, time_limit
+import synthetic_room as world
+from test_reliability_hostile import refused, time_limit
 
 ROBOT = UpdaterConfig.profile("robot")
 BOX = world.Rect(5.2, 5.2, 5.8, 5.8)      # in the map, gone from the room

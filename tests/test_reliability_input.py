@@ -29,12 +29,8 @@ from robotlogs.rosbag import BagWriter, read_bag, write_bag
 from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK
 
-try:
-    import test_sim_scenario as scenario_tests
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import test_sim_scenario as scenario_tests
-    from tests import synthetic_room as world
+import test_sim_scenario as scenario_tests
+import synthetic_room as world
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 BAD = {"nan": np.nan, "-inf": -np.inf, "negative": -1.0, "beyond range": 1e9}

@@ -6,9 +6,7 @@ The full table is benchmarks/bench_mislocalisation.py."""
 from __future__ import annotations
 
 import math
-import sys
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,13 +17,8 @@ from localization.confidence import (UNSURE_COVARIANCE, UNSURE_FIT, PoseCheck, P
                                      search_grid)
 from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import bench_mislocalisation as bench  # noqa: E402
-
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
+from benchmarks import bench_mislocalisation as bench
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 NO_MOUNT = Pose2D(0.0, 0.0, 0.0)

@@ -3,16 +3,12 @@ objects the route sees, and memory, time and scores that stay level. Slow: run w
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from sim import geometry as geo
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import bench_soak as soak  # noqa: E402
+from benchmarks import bench_soak as soak
 
 pytestmark = pytest.mark.slow
 

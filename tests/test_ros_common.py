@@ -136,10 +136,7 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     from robot.ros_common.health import Health, pipeline_values
     from updater import UpdaterConfig
 
-    try:
-        import synthetic_room as world
-    except ImportError:
-        from tests import synthetic_room as world
+    import synthetic_room as world
 
     box = world.Rect(6.0, 5.0, 6.6, 5.6)
     ref = world.rasterise(world.room_walls() + [box])

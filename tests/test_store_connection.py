@@ -17,20 +17,13 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from mapstore import StoreError, backends, open_store
 from mapstore.backends import ConnectionLost, connect_problem
 
-try:
-    import postgres_tools
-except ImportError:  # tests collected as a package
-    from tests import postgres_tools
+import postgres_tools
 
 
-@pytest.fixture(scope="module")
-def server():
-    srv, why = postgres_tools.server()
-    if srv is None:
-        pytest.skip(f"no PostgreSQL server: {why}")
-    yield srv
-    srv.resume()            # whatever a test left, the server stops
-    srv.stop()
+@pytest.fixture
+def server(postgres):
+    """This file's PostgreSQL server (conftest.py), which its tests restart and pause."""
+    return postgres
 
 
 def grid(seed: int) -> OccupancyGrid:

@@ -16,10 +16,7 @@ import pytest
 from mapstore import StoreError, open_store
 from mapstore.text import NAME_LIMIT, NOTE_LIMIT, check_text
 
-try:
-    import postgres_tools
-except ImportError:  # tests collected as a package
-    from tests import postgres_tools
+import postgres_tools
 
 ROOT = Path(__file__).resolve().parents[1]
 SECRET = "s3cr3t-XYZ"
@@ -51,15 +48,11 @@ def password_login(srv, role: str, password: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def server():
-    srv, why = postgres_tools.server()
-    if srv is None:
-        pytest.skip(f"no PostgreSQL server: {why}")
-    try:
-        dbs = (password_login(srv, "mapper", SECRET), password_login(srv, "mapper2", AT_SECRET))
-        yield srv, dbs
-    finally:
-        srv.stop()
+def server(postgres):
+    """This file's PostgreSQL server (conftest.py), its two roles logging in with a password,
+    and their databases."""
+    return postgres, (password_login(postgres, "mapper", SECRET),
+                      password_login(postgres, "mapper2", AT_SECRET))
 
 
 def forms(srv, dbs) -> dict[str, bool]:

@@ -20,10 +20,7 @@ from mapupdate.summaries import update_lines as summary_lines
 from robot.replay import LogSource, Outputs, ScanClock, update_from_log
 from updater import ScanStatus, UpdaterConfig
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 BOX = world.Rect(5.2, 5.2, 5.8, 5.8)      # in the map, gone from the room
 UNMAPPED = world.Rect(2.0, 2.0, 3.0, 3.0)  # floor the map leaves unknown

@@ -15,10 +15,7 @@ from updater import (BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, Ma
                      UpdaterConfig, UpdaterError)
 from updater.gating import GATED_FAST_TURN, GATED_INTERVAL, GATED_NO_MOTION, GATED_TIME_BACK, Gate
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 CENTRE = Pose2D(5.5, 5.5, 0.3)
 

@@ -19,10 +19,7 @@ from gridmap import UNKNOWN as UNK
 from updater import UpdaterConfig, steps
 from updater import _kernels as K
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 
 # --- references -------------------------------------------------------------------------------

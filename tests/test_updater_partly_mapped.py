@@ -7,10 +7,7 @@ import numpy as np
 from gridmap import UNKNOWN, Pose2D
 from updater import MapUpdater, ScanStatus, UpdaterConfig
 
-try:
-    import synthetic_room as world
-except ImportError:  # pragma: no cover
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 CONFIG = UpdaterConfig(gating=False)
 

@@ -13,10 +13,7 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, Pose2D
 from gridmap.raycast import traverse
 from updater import MapUpdater, UpdaterConfig
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 Circle, Drive, Rect = world.Circle, world.Drive, world.Rect
 

@@ -12,10 +12,7 @@ import numpy as np
 from gridmap import FREE, OCCUPIED, Pose2D
 from updater import MapUpdater, UpdaterConfig
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 BOX = world.Rect(6.4125, 7.1125, 7.0125, 7.9125)       # 0.6 x 0.8 m, removed from the world
 

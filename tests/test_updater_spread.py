@@ -14,10 +14,7 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, Pose2D
 from updater import MapUpdater, UpdaterConfig, UpdaterError
 from updater import steps
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 BOX = world.Rect(6.4125, 7.1125, 7.0125, 7.9125)       # 0.6 x 0.8 m, removed from the world
 BASE = dict(gating=False, unanimous_min=3)

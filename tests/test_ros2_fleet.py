@@ -488,3 +488,54 @@ def test_a_cell_two_robots_changed_differently_goes_to_the_one_that_committed_la
         check_served(own, nodes, 4, expected)
     finally:
         own.close()
+
+
+def test_a_robot_committing_polls_after_another_keeps_its_session(graph, fleet, postgres,
+                                                                  tmp_path):
+    """robot1 commits; robot2, its session not committed yet, takes up robot1's version at its
+    next poll and commits several poll periods later. Its box is not lost: its node laid its
+    uncommitted changes on the newer version, and its commit, made on it, holds both boxes
+    without a merge."""
+    from mapstore import open_store
+
+    base = fleet["base"].data
+    own = ros2_tools.Graph(tmp_path, other_than=graph)
+    try:
+        url = new_store(postgres, fleet["base"])
+        robots = ("robot1", "robot2")
+        nodes = start_nodes(own, url, robots)
+        play_at_once(own, {"bags": {r: fleet["bags"][r] for r in robots},
+                           "scans": {r: fleet["scans"][r] for r in robots}})
+        log = own.folder / "operator.log"
+        with open(log, "w") as err:
+            operator = subprocess.Popen([str(ros2_tools.PYTHON), "-c", COMMITS, *robots],
+                                        env=own.env, cwd=own.folder, text=True,
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        stderr=err, start_new_session=True)
+        own.procs.append(operator)
+        out = _lines(operator.stdout)
+        assert _next_line(out, 120, "the operator's clients", log).strip() == "ready"
+        operator.stdin.write("robot1\n")
+        operator.stdin.flush()
+
+        def latest() -> int:
+            with open_store(url) as store:
+                return store.latest()
+        ros2_tools.wait_until(lambda: latest() == 2, 60, "robot1's commit as v2")
+        seen = watch(own, {"robot2": {"store_version": "2"}}, timeout=10 * POLL)
+        assert seen["nodes"]["robot2"]["ok"], f"robot2 did not take up v2: {seen}"
+        operator.stdin.write("robot2\n")
+        operator.stdin.flush()
+        answers = json.loads(_next_line(out, 120, "the nodes' answers to commit", log))
+        operator.wait(30)
+        assert answers["robot1"]["message"] == "committed v2, the reference now", answers
+        assert answers["robot2"]["message"] == "committed v3, the reference now", answers
+        state = store_state(url)
+        assert [(v.number, v.parent, v.merge_parent) for v in state["log"]] == \
+            [(1, None, None), (2, 1, None), (3, 2, None)]
+        expected = site_map(base, fleet["alone"], robots)
+        off = int((state["site"] != expected).sum())
+        assert off == 0, f"the site's map v3 differs from both robots' sessions in {off} cells"
+        check_served(own, nodes, 3, expected)
+    finally:
+        own.close()

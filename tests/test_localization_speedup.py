@@ -1,10 +1,9 @@
 """The localiser's fused kernels against plain NumPy / Python written from their definitions,
-on seeded random inputs, and the whole filter against the frozen copy of the code before them
-(``benchmarks/localization_before``): the same particles and estimates, bit for bit."""
+on seeded random inputs, and the whole filter against what the code before them gave on the
+same tour, recorded in ``tests/data/golden/localization_filter_case*.npz``
+(tests/data/golden/README.md): the same particles and estimates, bit for bit."""
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +14,10 @@ from localization import _kernels as k
 from localization.estimate import estimate, weighted_mean_cov
 from localization.resample import KldParameters, Scratch, kld_resample, resample_indices
 from localization.sensor import LikelihoodField, select_beams
+from tests.data.golden import golden
 
-ROOT = Path(__file__).resolve().parents[1]
+import synthetic_warehouse as syn
+
 BIN = np.array([0.5, 0.5, math.radians(10)])
 N_THETA = 36
 
@@ -238,12 +239,10 @@ def test_select_beams_angles_are_the_scans():
     assert np.array_equal(beams.points, np.column_stack((rr * np.cos(a), rr * np.sin(a))))
 
 
-# --- the whole filter, before and after ----------------------------------------------------
-@pytest.fixture(scope="module")
-def tour():
-    sys.path.insert(0, str(ROOT / "tests"))
-    import synthetic_warehouse as syn
-
+# --- the whole filter, against the code before -------------------------------------------
+def make_tour():
+    """The map, the lidar, the true poses, the odometry and the scans of 90 steps of the
+    synthetic warehouse's route (seeded)."""
     layout = syn.warehouse()
     truth, grid = syn.truth_grid(layout), syn.map_grid(layout)
     rng = np.random.default_rng(0)
@@ -253,33 +252,58 @@ def tour():
     return grid, lidar, poses, odom, [lidar.scan(truth, p, rng) for p in poses]
 
 
-@pytest.mark.parametrize("config, start", [
+def tour_fingerprint(tour) -> str:
+    grid, lidar, poses, odom, scans = tour
+    return golden.fingerprint(grid.data, grid.resolution, grid.origin, lidar.mount,
+                              list(poses), list(odom), scans)
+
+
+@pytest.fixture(scope="module")
+def tour():
+    return make_tour()
+
+
+# (configuration, start) of the runs recorded in localization_filter_case{index}.npz
+FILTER_CASES = [
     ({}, "pose"), ({"min_particles": 3000, "max_particles": 3000}, "pose"),
     ({"laser_model_type": "likelihood_field_prob", "resampler": "residual"}, "pose"),
     ({"max_particles": 4000, "recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1},
      "global"),
     # odometry that jumps 0.8 m half way: the filter is lost and injects random particles
-    ({"recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1}, "jump")])
-def test_filter_gives_the_same_particles_and_estimates_as_before(tour, config, start):
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from localization_before import MonteCarloLocalizer as Before
+    ({"recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1}, "jump")]
 
+
+def run_filter(loc, tour, start):
+    """Start ``loc`` as ``start`` says and update it with every third scan of the tour:
+    yields (what update returned, the estimate) after each update."""
     grid, lidar, poses, odom, scans = tour
-    cfg = LocalizerConfig(**config)
-    pair = [MonteCarloLocalizer(grid, cfg, seed=11), Before(grid, cfg, seed=11)]
-    for loc in pair:
-        if start == "global":
-            loc.initialize_global()
-        else:
-            loc.initialize(poses[0], np.diag([0.02, 0.02, 0.005]))
+    if start == "global":
+        loc.initialize_global()
+    else:
+        loc.initialize(poses[0], np.diag([0.02, 0.02, 0.005]))
     for i in range(0, len(scans), 3):
         o = odom[i]
         if start == "jump" and i >= len(scans) // 2:
             o = Pose2D(o.x + 0.8, o.y, o.theta)
-        now, before = (loc.update(o, scans[i], lidar.mount) for loc in pair)
-        assert now == before
-        new, old = (loc.estimate() for loc in pair)
-        assert np.array_equal(pair[0].particles, pair[1].particles)
-        assert np.array_equal(pair[0].weights, pair[1].weights)
-        assert new.pose == old.pose and np.array_equal(new.cov, old.cov)
-        assert new.cluster_weight == old.cluster_weight
+        yield loc.update(o, scans[i], lidar.mount), loc.estimate()
+
+
+@pytest.mark.parametrize("case", range(len(FILTER_CASES)))
+def test_filter_gives_the_same_particles_and_estimates_as_before(tour, case):
+    """After every update: what ``update`` returned, the particles and weights (their SHA-256
+    digests, of dtype, shape and bytes), the estimate's pose, covariance and cluster weight,
+    all as the code before gave them."""
+    config, start = FILTER_CASES[case]
+    want = golden.Golden(f"localization_filter_case{case}")
+    want.check_inputs(tour_fingerprint(tour))
+    assert want.facts["case"] == golden.as_recorded([config, start])
+    loc = MonteCarloLocalizer(tour[0], LocalizerConfig(**config), seed=11)
+    k = -1
+    for k, (updated, est) in enumerate(run_filter(loc, tour, start)):
+        assert updated == bool(want["updated"][k])
+        assert golden.array_digest(loc.particles) == str(want["particles"][k]), f"update {k}"
+        assert golden.array_digest(loc.weights) == str(want["weights"][k]), f"update {k}"
+        assert np.array_equal(est.pose.as_array(), want["pose"][k])
+        assert np.array_equal(est.cov, want["cov"][k])
+        assert est.cluster_weight == want["cluster_weight"][k]
+    assert k + 1 == len(want["updated"])

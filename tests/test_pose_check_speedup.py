@@ -1,13 +1,12 @@
 """The pose check's grid kernels against plain NumPy written from their definitions and against
 the per-pose kernels they replace, on seeded random inputs; and the whole check (verdict,
-refine, fit) against the frozen copy of the code before them (``benchmarks/pose_check_before``)
-on random scans in a synthetic room: the same verdicts, refined poses and fits, bit for bit."""
+refine, fit) on random scans in a synthetic room against what the code before the grid
+kernels gave on them, recorded in ``tests/data/golden/pose_check_*.npz``
+(tests/data/golden/README.md): the same verdicts, refined poses and fits, bit for bit."""
 
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,15 +14,9 @@ import pytest
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D, Scan
 from localization import _kernels as k
 from localization.confidence import PoseCheck, PoseCheckConfig, SearchGrid, search_grid
+from tests.data.golden import golden
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from benchmarks import pose_check_before as before  # noqa: E402
-
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
+import synthetic_room as world
 
 
 def random_grid(rng, h=41, w=57):
@@ -179,31 +172,60 @@ def random_calls(rng, shapes, mount, n=40):
         yield scan, told, cov
 
 
-@pytest.mark.parametrize("seed, config", [
-    (0, {}), (1, {}), (2, {"slack_cells": 1}), (3, {"max_beams": 97, "polish_steps": 3}),
-    (4, {"refine": False}), (5, {"fine_step": 0.04, "coarse_steps_deg": 2, "cap": 0.3})])
-def test_the_check_gives_the_verdicts_of_the_code_before(seed, config):
+# (seed, configuration) of the runs recorded in pose_check_case{index}.npz
+CHECK_CASES = [(0, {}), (1, {}), (2, {"slack_cells": 1}),
+               (3, {"max_beams": 97, "polish_steps": 3}), (4, {"refine": False}),
+               (5, {"fine_step": 0.04, "coarse_steps_deg": 2, "cap": 0.3})]
+
+
+def check_case(seed: int):
+    """The room's map, the lidar mount and the calls (scan, pose given, covariance) of a run
+    of ``CHECK_CASES``."""
     rng = np.random.default_rng(300 + seed)
     shapes, ref = room_world(rng)
-    cfg = PoseCheckConfig(**config)
-    new, old = PoseCheck(ref, cfg), before.PoseCheck(ref, cfg)
     mount = Pose2D(0.1, -0.02, 0.05) if seed % 2 else Pose2D(0.0, 0.0, 0.0)
-    kinds = set()
-    for scan, told, cov in random_calls(rng, shapes, mount):
-        got = new.verdict(scan, told, mount, cov)
-        assert got == old.verdict(scan, told, mount, cov)
-        kinds.add(got.verdict.value)
-        assert new.refine(scan, told, mount) == old.refine(scan, told, mount)
-        f, g = new.fit(scan, told, mount), old.fit(scan, told, mount)
-        assert (f.fit, f.gain, f.correction, f.beams) == (g.fit, g.gain, g.correction, g.beams)
+    return ref, mount, list(random_calls(rng, shapes, mount))
+
+
+def check_calls(check, calls, mount) -> list:
+    """Per call: the verdict, the refined pose and the fit (its value, gain, correction and
+    beams), as the golden files hold them."""
+    out = []
+    for scan, told, cov in calls:          # in this order: a refusal holds for a while
+        verdict = check.verdict(scan, told, mount, cov)
+        refined = check.refine(scan, told, mount)
+        f = check.fit(scan, told, mount)
+        out.append(golden.as_recorded({"verdict": verdict, "refine": refined,
+                                       "fit": [f.fit, f.gain, f.correction, f.beams]}))
+    return out
+
+
+@pytest.mark.parametrize("case", range(len(CHECK_CASES)))
+def test_the_check_gives_the_verdicts_of_the_code_before(case):
+    seed, config = CHECK_CASES[case]
+    ref, mount, calls = check_case(seed)
+    want = golden.Golden(f"pose_check_case{case}")
+    want.check_inputs(golden.fingerprint(ref.data, mount, calls))
+    assert want.facts["case"] == golden.as_recorded([seed, config])
+    cfg = PoseCheckConfig(**config)
+    got = check_calls(PoseCheck(ref, cfg), calls, mount)
+    for n, (a, b) in enumerate(zip(got, want.facts["calls"], strict=True)):
+        assert a == b, f"call {n}"
+    kinds = {c["verdict"]["verdict"] for c in got}
     assert "refused" in kinds and ({"accepted"} if not cfg.refine else {"refined"}) <= kinds
 
 
-def test_a_map_one_cell_wide_still_refines_as_before():
+def one_cell_wide():
     data = np.full((1, 80), FREE, np.int8)
     data[0, 40] = OCCUPIED
     grid = OccupancyGrid(data, 0.05, (0.0, 0.0))
     scan = Scan(np.full(90, 1.0, np.float32), -math.pi / 4, math.pi / 180, 0.05, 20.0, time=1.0)
-    pose, mount = Pose2D(1.0, 0.02, 0.0), Pose2D(0.0, 0.0, 0.0)
-    assert PoseCheck(grid).verdict(scan, pose, mount) == \
-        before.PoseCheck(grid).verdict(scan, pose, mount)
+    return grid, scan, Pose2D(1.0, 0.02, 0.0), Pose2D(0.0, 0.0, 0.0)
+
+
+def test_a_map_one_cell_wide_still_refines_as_before():
+    grid, scan, pose, mount = one_cell_wide()
+    want = golden.Golden("pose_check_one_cell_wide")
+    want.check_inputs(golden.fingerprint(grid.data, scan, pose, mount))
+    assert golden.as_recorded(PoseCheck(grid).verdict(scan, pose, mount)) == \
+        want.facts["verdict"]

@@ -4,36 +4,39 @@ bits of the flag buffers when there are enough of them.
 The state of a 2000 x 2000 map is summed from the arrays the updater holds (their ``nbytes``,
 the per-beam workspace included) after it processed real scans; the counts packed above the
 flags are checked against a plain count of random flag sequences, past saturation; and a
-state file of the layout before (the flags alone in the buffers, a ``seen`` array of counts up
-to 255), written by the code kept in ``benchmarks/updater_before``, loads and continues as the
-code that wrote it does.
+state file of the layout before (format 1: the flags alone in the buffers, a ``seen`` array of
+counts up to 255), written by the code before the packed counts
+(``tests/data/golden/updater_state_format1.npz``), loads and continues as that code did, the
+reports and maps it gave recorded in ``tests/data/golden`` (README.md there).
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
+import json
 
 import numpy as np
 import pytest
 
 from gridmap import UNKNOWN, OccupancyGrid
+from tests.data.golden import golden
 from updater import MapUpdater, UpdaterConfig, UpdaterError, steps
 from updater import _kernels as K
 from updater.hit_tiles import HitTiles
 
-try:
-    from test_updater_speedup import room_session, unknown_corner
-except ImportError:  # tests collected as a package
-    from tests.test_updater_speedup import room_session, unknown_corner
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from updater_before import AS_BEFORE  # noqa: E402
-from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
+from test_updater_speedup import room_session, same_config, unknown_corner
 
 BAR_BYTES = 16e6
-# update's defaults as the code kept in benchmarks/updater_before can run them
-ROBOT_AS_BEFORE = {**UpdaterConfig.profile("robot").to_dict(), **AS_BEFORE}
+# mapupdate update's defaults without the rules that came after the code before the packed
+# counts, which it cannot run: the run filter by width, the spread of freed objects, the
+# neighbour support by M's value, the removed-obstacle walks' skip across a run, the freeing
+# with free neighbours and the gate's single confirmation. The golden files of these tests
+# were recorded with it.
+ROBOT_AS_BEFORE = {**UpdaterConfig.profile("robot").to_dict(),
+                   "min_run_width": 0.0, "spread_removed": False, "support_exact_state": False,
+                   "removed_skip_across": False, "free_with_neighbours": False,
+                   "gate_confirm_once": False}
+STATE_FORMAT_1 = golden.HERE / "updater_state_format1.npz"
+FLAG_KEYS = ("unchanged_flags", "changed_flags", "new_obstacle_flags")
 SIZE = 2000
 
 
@@ -207,34 +210,46 @@ def test_no_count_field_where_the_buffer_leaves_too_few_bits():
     assert steps.count_shift(UpdaterConfig()) == 0       # the paper's rules count nothing
 
 
-def same_run(a, b, scans) -> None:
-    """The same reports (``a``, this code, makes no flag where one would change nothing: fewer
-    of them, never more), the same output and evidence."""
-    for scan, noisy, true in scans:
-        got = a.process(scan, noisy, odometry=true).summary()
-        want = b.process(scan, noisy, odometry=true).summary()
-        for key in ("unchanged_flags", "changed_flags", "new_obstacle_flags"):
-            assert got.pop(key) <= want.pop(key)
-        assert got == want
-    assert np.array_equal(a.updated_map().data, b.updated_map().data)
-    assert a.evidence_summary() == b.evidence_summary()
-    assert np.array_equal(a.change_counts(), b.change_counts())
+def same_run(updater, want: golden.Golden, scans) -> None:
+    """The recorded reports of the code before (``updater``, this code, makes no flag where
+    one would change nothing: fewer of them, never more), its output map, evidence and change
+    counts."""
+    for k, (scan, noisy, true) in enumerate(scans):
+        got = golden.as_recorded(updater.process(scan, noisy, odometry=true).summary())
+        recorded = dict(want.facts["reports"][k])
+        for key in FLAG_KEYS:
+            assert got.pop(key) <= recorded.pop(key)
+        assert got == recorded
+    assert len(scans) == len(want.facts["reports"])
+    assert np.array_equal(updater.updated_map().data, want["map"])
+    assert golden.as_recorded(updater.evidence_summary()) == want.facts["evidence"]
+    assert np.array_equal(updater.change_counts(), want["change_counts"])
+
+
+def format1_session():
+    """The map and scans of the format-1 state file: its first half wrote the file."""
+    ref, scans, _ = room_session(16.0, 1)
+    return unknown_corner(ref), scans
+
+
+def test_the_format_1_state_file_is_one_of_the_layout_before():
+    """The fixture: the flags alone in the buffers, counts past the packed field's top in its
+    ``seen``, no checksums, and ``ROBOT_AS_BEFORE`` as its configuration."""
+    with np.load(STATE_FORMAT_1, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        assert meta["format"] == 1 and "checksums" not in meta
+        assert "seen" in z.files and not np.any(z["hist"] >> 10)
+        assert z["seen"].max() > 0xFFFF >> 10
+    same_config(UpdaterConfig(**ROBOT_AS_BEFORE), meta["config"])
 
 
 def test_a_state_of_the_layout_before_loads_and_continues_alike(tmp_path):
-    ref, scans, _ = room_session(16.0, 1)
-    ref = unknown_corner(ref)
-    before = BeforeMapUpdater(ref, UpdaterConfig(**ROBOT_AS_BEFORE))
-    half = len(scans) // 2
-    for scan, noisy, true in scans[:half]:
-        before.process(scan, noisy, odometry=true)
-    assert before._seen.max() > 0xFFFF >> 10        # counts past the packed field's top
-    before.save(tmp_path / "old.npz")
-    with np.load(tmp_path / "old.npz") as z:
-        assert "seen" in z.files and not np.any(z["hist"] >> 10)
-    loaded = MapUpdater.load(tmp_path / "old.npz")
+    ref, scans = format1_session()
+    want = golden.Golden("updater_state_format1_continued")
+    want.check_inputs(golden.fingerprint(ref.data, scans))
+    loaded = MapUpdater.load(STATE_FORMAT_1)
     assert loaded._seen.size == 0
-    same_run(loaded, before, scans[half:])
+    same_run(loaded, want, scans[len(scans) // 2:])
     # saved in the new layout, loaded again: the same state
     loaded.save(tmp_path / "new.npz")
     again = MapUpdater.load(tmp_path / "new.npz")
@@ -243,28 +258,37 @@ def test_a_state_of_the_layout_before_loads_and_continues_alike(tmp_path):
 
 
 def test_a_state_that_does_not_fit_is_refused_in_one_line(tmp_path):
-    ref, scans, _ = room_session(2.0, 2)
-    before = BeforeMapUpdater(ref, UpdaterConfig(**ROBOT_AS_BEFORE))
-    for scan, noisy, true in scans:
-        before.process(scan, noisy, odometry=true)
-    before._seen = before._seen[:, :-1].copy()        # counts of another map
-    before.save(tmp_path / "bad.npz")
+    """The format-1 state with the flag counts of another map (a column fewer), written as
+    the code before wrote its states (no checksums to refuse it first)."""
+    with np.load(STATE_FORMAT_1, allow_pickle=False) as z:
+        arrays = {name: z[name] for name in z.files}
+    arrays["seen"] = arrays["seen"][:, :-1].copy()
+    np.savez_compressed(tmp_path / "bad.npz", **arrays)
     with pytest.raises(UpdaterError, match="flag counts do not fit") as err:
         MapUpdater.load(tmp_path / "bad.npz")
     assert "\n" not in str(err.value)
 
 
+def twin_session():
+    ref, scans, _ = room_session(4.0, 3)
+    return ref, scans
+
+
 @pytest.mark.parametrize("buffer_size", [10, 14])
 def test_a_state_of_either_layout_saves_and_loads_as_it_was(tmp_path, buffer_size):
-    ref, scans, _ = room_session(4.0, 3)
+    """Saved half way and loaded, the updater goes on as the code before went on from the
+    same scans (with N_b = 14 the counts are kept apart, not packed)."""
+    ref, scans = twin_session()
     config = UpdaterConfig(**{**ROBOT_AS_BEFORE, "buffer_size": buffer_size})
-    updater, twin = MapUpdater(ref, config), BeforeMapUpdater(ref, config)
+    want = golden.Golden(f"updater_twin_buffer{buffer_size}")
+    want.check_inputs(golden.fingerprint(ref.data, scans))
+    same_config(config, want.facts["config"])
+    updater = MapUpdater(ref, config)
     half = len(scans) // 2
     for scan, noisy, true in scans[:half]:
         updater.process(scan, noisy, odometry=true)
-        twin.process(scan, noisy, odometry=true)
     updater.save(tmp_path / "s.npz")
     loaded = MapUpdater.load(tmp_path / "s.npz")
     assert np.array_equal(loaded._hist, updater._hist)
     assert np.array_equal(loaded._seen, updater._seen)
-    same_run(loaded, twin, scans[half:])
+    same_run(loaded, want, scans[half:])

@@ -4,31 +4,25 @@ The walks that flag cells as they go (``walk_beams``), the decision that decides
 once (``decide``), the classifier's two calls (``prepare_beams``, ``classify_scan``) and the
 walks into unknown space are each checked against a plain Python reference written here, on
 seeded random input. Then the whole updater runs on random scans in a synthetic room (with
-the paper's configuration and with ``mapupdate update``'s) beside the code before the change,
-kept in ``benchmarks/updater_before``: every report, every buffer and the output map must be
-the same, bit for bit.
+the paper's configuration and with ``mapupdate update``'s) against what the code before the
+fused walks gave on the same scans, recorded in ``tests/data/golden/updater_room_seed*.npz``
+(tests/data/golden/README.md): every report, every buffer and the output map must be the
+same, bit for bit.
 """
 
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN
+from tests.data.golden import golden
 from updater import MapUpdater, UpdaterConfig, steps
 from updater import _kernels as K
 
-try:
-    import synthetic_room as world
-except ImportError:  # tests collected as a package
-    from tests import synthetic_room as world
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
+import synthetic_room as world
 
 
 # --- plain references -------------------------------------------------------------------------
@@ -518,7 +512,7 @@ def test_per_beam_distances_are_the_configuration_s_to_the_bit():
         assert np.array_equal(got, want, equal_nan=True)
 
 
-# --- the whole updater, before and after ------------------------------------------------------
+# --- the whole updater, against the code before ----------------------------------------------
 def room_session(seconds, seed):
     """A map of the room with one box, a world with that box moved and a new one: scans from
     a circling robot with noisy poses (some beams lost)."""
@@ -545,61 +539,79 @@ def unknown_corner(ref):
     return type(ref)(data, ref.resolution, ref.origin)
 
 
-@pytest.mark.parametrize("seed, robot", [(0, False), (1, True), (2, True), (3, False)])
-def test_the_updater_gives_what_it_gave_before_to_the_bit(seed, robot):
+# (seed, robot) of the runs recorded in tests/data/golden/updater_room_seed{seed}.npz
+ROOM_CASES = [(0, False), (1, True), (2, True), (3, False)]
+
+
+def room_case(seed: int, robot: bool):
+    """The reference map, the scans ((scan, noisy pose, true pose) each) and the configuration
+    of a run of ``ROOM_CASES``: the paper's rules with every scan processed, or (``robot``)
+    ``mapupdate update``'s additions as the code before ran them (growth into the unknown of
+    the map's top right quarter, the unanimous rule, the gate's confirmation), every other
+    key at its default."""
     ref, scans, _ = room_session(14.0, seed)
     cfg = UpdaterConfig(gating=False)
-    if robot:     # mapupdate update's additions: growth into the unknown, the unanimous rule
+    if robot:
         ref = unknown_corner(ref)
         cfg = UpdaterConfig(grow_into_unknown=True, unanimous_min=3, gate_confirm=True,
                             gate_min_interval=0.0, gate_min_distance=0.2,
                             gate_min_rotation_deg=20.0, fill_gaps=seed == 2,
                             virtual_to_measured_ratio=1 + seed % 2)
-    after, before = MapUpdater(ref, cfg), BeforeMapUpdater(ref, cfg)
-    mask = np.uint16(steps.buffer_mask(cfg))
+    return ref, scans, cfg
+
+
+def same_config(cfg: UpdaterConfig, recorded: dict) -> None:
+    """The configuration is the one the golden file was recorded with (keys added since then
+    aside)."""
+    now = golden.as_recorded(cfg.to_dict())
+    assert {k: now.get(k) for k in recorded} == recorded
+
+
+@pytest.mark.parametrize("seed, robot", ROOM_CASES)
+def test_the_updater_gives_what_it_gave_before_to_the_bit(seed, robot):
+    """The recorded reports of the code before (its flag counts less those that would have
+    changed nothing: the code before flagged the free cells with settled buffers too, where no
+    changed flag came first, and made changed flags in buffers full of them, on the free
+    cells of M the new-obstacle and fill_gaps flags; the walks flag the others), per-beam
+    verdicts, buffers, hit buffers, flag counts, statistics and output map."""
+    ref, scans, cfg = room_case(seed, robot)
+    want = golden.Golden(f"updater_room_seed{seed}")
+    want.check_inputs(golden.fingerprint(ref.data, scans))
+    same_config(cfg, want.facts["config"])
+    after = MapUpdater(ref, cfg)
+    verdicts = golden.unpack(want["verdicts"], want["verdict_lengths"])
     skipped = 0
-    for scan, noisy, true in scans:
-        quiet = settled_free_cells(ref.data, before._hist,
-                                   before._seen if before._seen.size else None, cfg)
-        full = (before._hist.reshape(-1) & mask) == mask
+    for k, (scan, noisy, true) in enumerate(scans):
         a = after.process(scan, noisy, odometry=true)
-        b = before.process(scan, noisy, odometry=true)
-        # the same report, but for the flags that would have changed nothing: the code before
-        # flagged the free cells with settled buffers too, where no changed flag came first,
-        # and made changed flags in buffers full of them (on the free cells of M: the
-        # new-obstacle and fill_gaps flags; the walks flag the others)
-        changed = before._ws.changed[:b.changed_flags]
-        quiet[changed] = False
-        passed = int(np.count_nonzero(quiet[before._ws.unchanged[:b.unchanged_flags]]))
-        assert a.unchanged_flags == b.unchanged_flags - passed
-        news = changed[ref.data.reshape(-1)[changed] == FREE]
-        assert news.size == b.new_obstacle_flags
-        assert a.changed_flags == b.changed_flags - int(np.count_nonzero(full[changed]))
-        assert a.new_obstacle_flags == b.new_obstacle_flags - int(np.count_nonzero(full[news]))
-        skipped += b.changed_flags - a.changed_flags
-        assert {**a.summary(), "unchanged_flags": 0, "changed_flags": 0,
-                "new_obstacle_flags": 0} == \
-            {**b.summary(), "unchanged_flags": 0, "changed_flags": 0, "new_obstacle_flags": 0}
-        assert (a.verdicts is None and b.verdicts is None) or \
-            np.array_equal(a.verdicts, b.verdicts)
+        b = want.facts["reports"][k]
+        assert a.unchanged_flags == b["unchanged_flags"] - want["settled_unchanged"][k]
+        assert a.changed_flags == b["changed_flags"] - want["full_changed"][k]
+        assert a.new_obstacle_flags == b["new_obstacle_flags"] - want["full_new_obstacle"][k]
+        skipped += b["changed_flags"] - a.changed_flags
+        flags = {"unchanged_flags": 0, "changed_flags": 0, "new_obstacle_flags": 0}
+        assert {**golden.as_recorded(a.summary()), **flags} == {**b, **flags}
+        assert (a.verdicts is None and verdicts[k] is None) or \
+            np.array_equal(a.verdicts, verdicts[k])
     assert skipped > 0
-    assert np.array_equal(after.updated_map().data, before.updated_map().data)
-    assert np.array_equal(after._hist & mask, before._hist)
-    assert np.array_equal(after._hits.dense(), before._hitbuf)
+    mask = np.uint16(steps.buffer_mask(cfg))
+    assert np.array_equal(after.updated_map().data, want["map"])
+    assert np.array_equal(after._hist & mask, want["hist"])
+    assert np.array_equal(after._hits.dense(), want["hits"])
     # the flag counts, kept above the flags now, are alike up to T, past which no rule tells a
     # free cell's apart (a settled cell's count stops there, as no walk flags it), and every
     # cell's up to N_b, past which no rule tells any apart (a count stops where changed flags
     # fill the buffer)
-    if before._seen.size:
-        counts, counts_before = after._flag_counts(), before._seen.reshape(-1)
+    if want["seen"].size:
+        counts, counts_before = after._flag_counts(), want["seen"].reshape(-1)
         for bound in (cfg.threshold, cfg.buffer_size):
             cells = slice(None) if bound == cfg.threshold else ref.data.reshape(-1) != FREE
             assert np.array_equal(np.minimum(counts, bound)[cells],
                                   np.minimum(counts_before, bound)[cells])
         assert np.all(counts <= counts_before) and np.any(counts < counts_before)
     else:
-        assert after._flag_counts() is None and np.array_equal(after._hist, before._hist)
-    assert after.stats == before.stats and after.n_changed == before.n_changed > 0
+        assert after._flag_counts() is None and np.array_equal(after._hist, want["hist"])
+    assert golden.as_recorded(after.stats) == want.facts["stats"]
+    assert after.n_changed == want.facts["n_changed"] > 0
     # between scans the changed-flag marks are set on the cells whose buffers are full of
     # changes alone, the unchanged-flag marks on the settled free cells alone
     full = (after._hist.reshape(-1) & mask) == mask

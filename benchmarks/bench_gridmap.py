@@ -8,13 +8,15 @@ runs after compilation. Run: ``python benchmarks/bench_gridmap.py``.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D, Scan  # noqa: E402
 

@@ -8,6 +8,7 @@ Usage: ``python benchmarks/bench_log_bounds.py``.
 from __future__ import annotations
 
 import gzip
+import os
 import platform
 import sys
 import tempfile
@@ -15,7 +16,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT)]
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path[:0] = [os.environ.get("BENCH_CODE_ROOT") or str(ROOT)]
 
 from robotlogs import LogError  # noqa: E402
 from robotlogs.carmen import read_carmen  # noqa: E402

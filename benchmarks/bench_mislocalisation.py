@@ -19,10 +19,11 @@ one cell of slack), and scans dropped by the lost check or refused by the pose c
 (without a localiser here, only its scan-fit part, not its covariance part): it refuses a scan
 when a pose of a small grid around the one given fits the scan to M1 clearly better.
 
-    python benchmarks/bench_mislocalisation.py [--quick] [--session W2] [--before]
+    python benchmarks/bench_mislocalisation.py [--quick] [--session W2] [--json PATH]
 
-``--before`` guards with the frozen copy of the pose check before its grid kernels
-(``benchmarks/pose_check_before``): the table must come out the same.
+``python benchmarks/run.py --baseline REV mislocalisation`` runs it on a git revision's packages
+and on the working tree's, and says whether the two tables are the same (``--json``: the
+wall time and the digest of the table's counts).
 
 Bars (exit 1 when missed), with the pose check: no G-occupied cell freed from 0.1 m or 1 deg of
 error on, nor after the kidnapping; no hole at any level. Below that (0.05 m, 0.5 deg: under a
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -41,7 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D  # noqa: E402
 
@@ -215,15 +218,10 @@ def level_size(level: str) -> tuple[float, float]:
 
 
 def run_table(rec: Recording, levels: dict[str, list[Error]], guard_config=None,
-              progress: bool = True, before: bool = False, config=None
-              ) -> list[tuple[str, int, Damage, Damage]]:
+              progress: bool = True, config=None) -> list[tuple[str, int, Damage, Damage]]:
     """(level, variants, damage without the pose check, damage with it) per level;
-    ``before``: the pose check's frozen copy (``benchmarks/pose_check_before``); ``config``:
-    the updater's (None: the paper profile's)."""
-    if before:
-        from benchmarks.pose_check_before import PoseCheck
-    else:
-        from localization.confidence import PoseCheck
+    ``config``: the updater's (None: the paper profile's)."""
+    from localization.confidence import PoseCheck
 
     guard = PoseCheck(rec.reference, guard_config)
     rows = []
@@ -252,13 +250,14 @@ def print_table(rows, processed_per_run: int) -> None:
 
 
 def main(argv=None) -> int:
+    from figures import Figures, add_option  # beside this script
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--session", default="W2")
     ap.add_argument("--quick", action="store_true", help="30 m of the route")
-    ap.add_argument("--before", action="store_true",
-                    help="the pose check as it was before its grid kernels")
     ap.add_argument("--profile", default="paper", choices=("paper", "robot"),
                     help="the updater's and the pose check's configuration (default paper)")
+    add_option(ap)
     args = ap.parse_args(argv)
     from localization.confidence import PoseCheckConfig
     from updater import UpdaterConfig
@@ -269,9 +268,13 @@ def main(argv=None) -> int:
     # the offsets are laid on poses given from outside, as a log's are
     rows = run_table(rec, error_levels(),
                      PoseCheckConfig.profile(args.profile).for_poses(own_localizer=False),
-                     before=args.before, config=UpdaterConfig.profile(args.profile))
+                     config=UpdaterConfig.profile(args.profile))
     print_table(rows, rows[0][2].processed)
     print(f"\nWall time {time.perf_counter() - t0:.0f} s.")
+    out = Figures()
+    out.add("wall time", time.perf_counter() - t0, "s")
+    out.output("the table's counts", [(name, n, vars(p), vars(g)) for name, n, p, g in rows])
+    out.write(args.json)
     freed = [name for name, _, _, g in rows if detectable(name) and g.freed]
     holes = [name for name, _, _, g in rows if g.holes]
     if freed:

@@ -1,27 +1,28 @@
 """Benchmark: the pose check and its refinement (``PoseCheck.verdict``) on the main job's own
-calls, before and after its grid kernels.
+calls.
 
 The main job (``mapupdate run``, by default its quick variant) runs once with
 ``PoseCheck.verdict`` wrapped to record every call: the check's map, the scan, the robot pose,
 the lidar mount and the localiser's covariance, in order. Those calls are then replayed on
-fresh checks of the same maps, by the frozen copy of the code before
-(``benchmarks/pose_check_before``) and by the live ``localization.confidence``, call by call,
-the two alternating which goes first. Each call is timed with the thread's CPU time
-(``time.thread_time``), so that other work on the machine counts as little as it can.
+fresh checks of the same maps, ``--repeats`` times, each call timed with the thread's CPU time
+(``time.thread_time``), so that other work on the machine counts as little as it can. Every
+replayed verdict (refused with its reason, or refined with its sensor pose) must equal the one
+the main job got.
 
-Every replayed verdict (refused with its reason, or refined with its sensor pose) must equal
-the other's and the one the main job got; so must every ``PoseCheck.fit`` (the fit, the gain
-and the correction, compared exactly).
+Before and after: ``python benchmarks/run.py --baseline REV pose_check`` runs this script on a
+git revision's packages and on the working tree's and sets the CPU times side by side, with
+whether the verdicts and the fits (``PoseCheck.fit``: the fit, the gain and the correction,
+to the bit) are the same (``--json``: the times and the digests of the verdicts and fits).
 
-    python benchmarks/bench_pose_check.py [--full] [--sessions K] [--repeats N] [--bar 2.0]
+    python benchmarks/bench_pose_check.py [--full] [--sessions K] [--repeats N] [--json PATH]
 
-Exit 1 when a verdict or a fit differs, or when the median over the repeats of the ratio of
-the summed CPU times (before / after) is below the bar.
+Exit 1 when a replayed verdict differs from the main job's.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import subprocess
@@ -30,13 +31,14 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 import localization.confidence as live  # noqa: E402
-from benchmarks import pose_check_before as before  # noqa: E402  (the frozen copy)
+from figures import Figures, add_option  # noqa: E402
 
 
 def record(full: bool, sessions: int | None) -> tuple[list, list]:
@@ -73,33 +75,24 @@ def record(full: bool, sessions: int | None) -> tuple[list, list]:
     return grids, calls
 
 
-def same_fit(a, b) -> bool:
-    if a is None or b is None:
-        return a is None and b is None
-    return (a.fit, a.gain, a.correction, a.beams) == (b.fit, b.gain, b.correction, b.beams)
+def fit_values(fit) -> tuple | None:
+    return None if fit is None else (fit.fit, fit.gain, fit.correction, fit.beams)
 
 
-def replay(grids, calls, repeat: int) -> tuple[float, float, list[str]]:
-    """One pass over the calls on fresh checks: (before's CPU seconds, after's, differences).
-    Odd passes call the live check first."""
-    checks = {"before": [before.PoseCheck(g) for g in grids],
-              "after": [live.PoseCheck(g) for g in grids]}
-    order = ("after", "before") if repeat % 2 else ("before", "after")
-    spent = {"before": 0.0, "after": 0.0}
-    diffs = []
+def replay(grids, calls, first: bool) -> tuple[float, list[str], list]:
+    """One pass over the calls on fresh checks: (CPU seconds, differences from the main
+    job's verdicts, and on the ``first`` pass the verdicts and fits)."""
+    checks = [live.PoseCheck(g) for g in grids]
+    spent, diffs, got = 0.0, [], []
     for n, (k, scan, pose, mount, cov, want) in enumerate(calls):
-        got = {}
-        for which in order:
-            t0 = time.thread_time()
-            got[which] = checks[which][k].verdict(scan, pose, mount, cov)
-            spent[which] += time.thread_time() - t0
-        if not got["before"] == got["after"] == want:
-            diffs.append(f"call {n}: before {got['before']}, after {got['after']}, "
-                         f"main job {want}")
-        if repeat == 0 and not same_fit(checks["before"][k].fit(scan, pose, mount),
-                                        checks["after"][k].fit(scan, pose, mount)):
-            diffs.append(f"call {n}: the fits differ")
-    return spent["before"], spent["after"], diffs
+        t0 = time.thread_time()
+        verdict = checks[k].verdict(scan, pose, mount, cov)
+        spent += time.thread_time() - t0
+        if verdict != want:
+            diffs.append(f"call {n}: replayed {verdict}, main job {want}")
+        if first:
+            got.append((verdict, fit_values(checks[k].fit(scan, pose, mount))))
+    return spent, diffs, got
 
 
 def machine() -> str:
@@ -118,7 +111,7 @@ def main(argv=None) -> int:
     ap.add_argument("--full", action="store_true", help="the full main job, not --quick")
     ap.add_argument("--sessions", type=int, default=None, help="only the first K sessions")
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--bar", type=float, default=2.0, help="least before / after CPU ratio")
+    add_option(ap)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     grids, calls = record(args.full, args.sessions)
@@ -126,22 +119,27 @@ def main(argv=None) -> int:
     print(f"{machine()}\n{len(calls)} calls of PoseCheck.verdict on {len(grids)} maps "
           f"({', '.join(f'{kinds.count(v)} {v}' for v in sorted(set(kinds)))}), recorded in "
           f"{time.perf_counter() - t0:.0f} s")
-    replay(grids, calls[:5], 0)               # compile or load both before timing
-    ratios, diffs = [], []
-    print("| pass | before s | after s | before ms / call | after ms / call | before / after |\n"
-          "|---|---|---|---|---|---|")
+    replay(grids, calls[:5], False)           # compile or load before timing
+    seconds, diffs, got = [], [], []
+    print("| pass | CPU s | ms / call |\n|---|---|---|")
     for r in range(args.repeats):
-        b, a, d = replay(grids, calls, r)
+        spent, d, g = replay(grids, calls, r == 0)
+        seconds.append(spent)
         diffs += d
-        ratios.append(b / a)
-        print(f"| {r + 1} | {b:.3f} | {a:.3f} | {1e3 * b / len(calls):.3f} | "
-              f"{1e3 * a / len(calls):.3f} | {b / a:.2f} |")
-    ratio = statistics.median(ratios)
-    print(f"\nmedian before / after {ratio:.2f} (bar {args.bar:g}); "
-          f"{'no verdict or fit differs' if not diffs else f'{len(diffs)} differences'}")
+        got += g
+        print(f"| {r + 1} | {spent:.3f} | {1e3 * spent / len(calls):.3f} |")
+    median = statistics.median(seconds)
+    print(f"\nmedian {median:.3f} s, {1e3 * median / len(calls):.3f} ms per call; "
+          f"{'no verdict differs from the main job' if not diffs else f'{len(diffs)} differ'}")
     for d in diffs[:10]:
         print(d)
-    return 1 if diffs or ratio < args.bar else 0
+    out = Figures()
+    out.add("CPU per pass over the calls (median)", median, "s")
+    out.add("CPU per call (median pass)", 1e3 * median / len(calls), "ms")
+    out.output(f"verdicts of the {len(calls)} calls", [v for v, _ in got])
+    out.output(f"fits of the {len(calls)} calls", [f for _, f in got])
+    out.write(args.json)
+    return 1 if diffs else 0
 
 
 if __name__ == "__main__":

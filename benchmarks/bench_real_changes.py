@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -37,7 +38,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(ROOT))
 DATA = ROOT.parent / "shared" / "data" / "radish"
 LOGS = ("aces", "acapulco", "csail", "freiburg-079", "freiburg-101", "orebro", "seattle")
 METHODS = ("robot", "robot_ungated", "paper", "paper_ungated", "hybrid", "fuse")

@@ -20,6 +20,8 @@ from pathlib import Path
 
 OVERHEAD_BAR = 0.30
 ROOT = Path(__file__).resolve().parents[1]
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+CODE = Path(os.environ.get("BENCH_CODE_ROOT") or ROOT)
 
 
 def timed_run(out: Path, rrd: Path | None, quick: bool) -> float:
@@ -28,7 +30,7 @@ def timed_run(out: Path, rrd: Path | None, quick: bool) -> float:
     cmd += ["--rerun", str(rrd)] if rrd is not None else []
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     t = time.perf_counter()
-    subprocess.run(cmd, cwd=ROOT, env=env, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, cwd=CODE, env=env, check=True, stdout=subprocess.DEVNULL)
     return time.perf_counter() - t
 
 

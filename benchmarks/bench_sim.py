@@ -20,6 +20,9 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
+
 import numpy as np  # noqa: E402
 
 import sim  # noqa: E402

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import copy
 import math
+import os
 import sys
 import threading
 import time
@@ -38,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 # [m] length of a random move. At least 0.5 m: a face moved by less than the updater's pairing
 # distance D(r) (0.15-0.30 m) pairs with where it was and is, by design, left in the map; such

@@ -52,6 +52,7 @@ import argparse
 import itertools
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -62,7 +63,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(ROOT))
 DATA = ROOT.parent / "shared" / "data"
 
 LIDARS = {"360": {"mount": [0.0, 0.0, 0.0], "fov_deg": 360, "beams": 720},

@@ -30,7 +30,8 @@ from pathlib import Path
 for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[var] = "1"
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 STUDY_RUNS = 10_000
 

@@ -10,23 +10,24 @@ the same whatever the map's size. One more pass with timers around the kernels s
 time of a 720-beam scan goes. Memory: the bytes of the updater's arrays for the 2000 x 2000
 map, and the peak resident memory of a process that does only that (resource.getrusage).
 
-Before and after: the updater as it was before the fused walks (a frozen copy in
-``benchmarks/updater_before``) and as it is, run on the same scans in alternating passes, back to
-back (``--pairs`` passes each): the median per scan of each pass, the median of those, their
-ratio, and whether the two gave the same output map. On the room (720 and 1440 beams) and on
-the real logs when they are at ../shared/data: the Intel lab (a map of the first half of the
-scans, updated with the second half) and MIT Killian Court (the first third, updated with the
-last third), with ``mapupdate update``'s updater configuration, timing the updater's
-``process`` calls alone (the scans and poses the pipeline gave it, recorded once), the median
-over the scans it processed past the gate. Times are the scan's thread CPU time.
-Then, in 5 more alternating passes each, the time of each scan split into the kernels that
-Python calls (a timer around each call) and the Python around them: where the ratio comes
-from, and where it falls short.
+The updater on the scans of ``mapupdate update``: on the room (720 and 1440 beams) and on the
+real logs when they are at ../shared/data: the Intel lab (a map of the first half of the scans,
+updated with the second half) and MIT Killian Court (the first third, updated with the last
+third), with ``mapupdate update``'s updater configuration (the robot profile), timing the
+updater's ``process`` calls alone (the scans and poses the pipeline gave it, recorded once),
+``--passes`` passes on the same calls: the median per processed scan of each pass, the median
+of those, and the median over the scans of each scan's best pass. Times are the scan's thread
+CPU time. Then, in 5 more passes, the time of each scan split into the kernels that Python
+calls (a timer around each call) and the Python around them.
 
-    python benchmarks/bench_updater.py [--scans N] [--pairs N] [--no-logs]
+Before and after: ``python benchmarks/run.py --baseline REV updater`` runs this script on a git
+revision's packages and on the working tree's, and sets the figures side by side, with whether
+the output maps are the same (``--json``: the figures and the maps' digests).
 
-Exits with 1 when a median per scan misses its budget, or when the 720-beam room or a real log
-is not at least twice as fast as before (the bar of "speed, round two") or gives another map.
+    python benchmarks/bench_updater.py [--scans N] [--passes N] [--no-logs] [--json PATH]
+
+Exits with 1 when a median per scan misses its budget, or the state of a 2000 x 2000 map its
+16 MB.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
 import subprocess
 import sys
@@ -42,18 +44,17 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+ROOT = Path(__file__).resolve().parents[1]
+# the packages measured: this checkout's, or a revision's (run.py --baseline)
+sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(ROOT))
 
+from figures import Figures, add_option  # noqa: E402
 from gridmap import OccupancyGrid, Pose2D, Scan  # noqa: E402
 from gridmap.raycast import cast_rays  # noqa: E402
 from updater import MapUpdater, UpdaterConfig  # noqa: E402
-from updater_before import AS_BEFORE  # noqa: E402
-from updater_before import MapUpdater as BeforeMapUpdater  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[2] / "shared/data"
+DATA = ROOT.parent / "shared/data"
 LOGS = {"Intel": (DATA / "intel.gfs.log", 2), "Killian": (DATA / "killian.clf.gz", 3)}
-SPEEDUP_BAR = 2.0       # before / after, median per scan
 STATE_BAR = 16e6        # [bytes] the state of a 2000 x 2000 map, every configuration
 # A scan's own processor time, not the time it waited for a core: the machine is shared, and a
 # scan preempted halfway would count the other process's work.
@@ -265,12 +266,11 @@ def classify_alone(kernels, kw) -> None:
                           kw["min_width"])
 
 
-# --- before and after -------------------------------------------------------------------------
-def replay(cls, ref: OccupancyGrid, config: UpdaterConfig,
-           calls) -> tuple[np.ndarray, np.ndarray]:
-    """A fresh updater of class ``cls`` fed ``calls`` ((scan, sensor pose, odometry) each):
-    (ms per call, NaN for a scan it did not process; its output map)."""
-    updater = cls(ref, config)
+# --- the scans of mapupdate update -----------------------------------------------------------
+def replay(ref: OccupancyGrid, config: UpdaterConfig, calls) -> tuple[np.ndarray, np.ndarray]:
+    """A fresh updater fed ``calls`` ((scan, sensor pose, odometry) each): (ms per call, NaN
+    for a scan it did not process; its output map)."""
+    updater = MapUpdater(ref, config)
     times = np.full(len(calls), np.nan)
     for k, (scan, pose, odometry) in enumerate(calls):
         t0 = CLOCK()
@@ -281,49 +281,38 @@ def replay(cls, ref: OccupancyGrid, config: UpdaterConfig,
     return times, updater.updated_map().data
 
 
-def before_after(ref: OccupancyGrid, config: UpdaterConfig, calls, pairs: int) -> dict:
-    """The code before and after on the same calls, in alternating passes, back to back: the
-    median of the passes' medians per processed scan, and, less touched by the other work of
-    a shared machine, the median over the scans of each scan's best pass."""
-    for cls in (BeforeMapUpdater, MapUpdater):      # compile (or load the cache) first
-        replay(cls, ref, config, calls[:20])
-    times = {"before": [], "after": []}
-    maps = {}
-    for _ in range(pairs):
-        for name, cls in (("before", BeforeMapUpdater), ("after", MapUpdater)):
-            ms, maps[name] = replay(cls, ref, config, calls)
-            times[name].append(ms)
-    medians = {k: [float(np.nanmedian(t)) for t in v] for k, v in times.items()}
-    before, after = (float(np.median(medians[k])) for k in ("before", "after"))
-    best = {k: float(np.nanmedian(np.min(v, axis=0))) for k, v in times.items()}
-    return {"before_ms": before, "after_ms": after, "ratio": before / after,
-            "best_before_ms": best["before"], "best_after_ms": best["after"],
-            "best_ratio": best["before"] / best["after"],
-            "passes": medians, "identical": bool(np.array_equal(maps["before"], maps["after"]))}
+def measure(ref: OccupancyGrid, config: UpdaterConfig, calls, passes: int) -> dict:
+    """``passes`` passes on the same calls, back to back: the median of the passes' medians
+    per processed scan, and, less touched by the other work of a shared machine, the median
+    over the scans of each scan's best pass; the output map (the same in every pass)."""
+    replay(ref, config, calls[:20])          # compile (or load the cache) first
+    times, maps = [], []
+    for _ in range(passes):
+        ms, out = replay(ref, config, calls)
+        times.append(ms)
+        maps.append(out)
+    medians = [float(np.nanmedian(t)) for t in times]
+    if any(not np.array_equal(m, maps[0]) for m in maps):
+        raise SystemExit("the passes gave different maps: the timings compare nothing")
+    return {"ms": float(np.median(medians)), "best_ms": float(np.nanmedian(np.min(times, 0))),
+            "passes": medians, "processed": int(np.count_nonzero(~np.isnan(times[0]))),
+            "map": maps[0]}
 
 
-def kernel_modules(cls) -> list:
-    """The kernel modules whose functions ``cls``'s Python calls: its package's, and gridmap's."""
-    import importlib
-
-    from gridmap import _kernels as grid
-
-    package = cls.__module__.rsplit(".", 1)[0]
-    found = [importlib.import_module(f"{package}._kernels"), grid]
-    try:
-        found.append(importlib.import_module(f"{package}._grid_kernels"))
-    except ImportError:
-        pass
-    return found
+def kernel_modules() -> list:
+    """The kernel modules whose functions the updater's Python calls: the modules of
+    ``updater`` and ``gridmap`` whose names hold "kernels" (as imported by now)."""
+    return [m for name, m in sorted(sys.modules.items()) if m is not None
+            and name.split(".")[0] in ("updater", "gridmap") and "kernels" in name]
 
 
-def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
-    """One pass of ``cls`` on ``calls``, the medians per processed scan [ms]: of the whole
-    call ("all"), of the kernels that Python calls, each timed around its call ("kernels":
-    their work and the cost of calling them), and of the rest ("Python")."""
+def python_split(ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
+    """One pass on ``calls``, the medians per processed scan [ms]: of the whole call ("all"),
+    of the kernels that Python calls, each timed around its call ("kernels": their work and
+    the cost of calling them), and of the rest ("Python")."""
     from numba.core.registry import CPUDispatcher
 
-    kernels = {(m, name): f for m in kernel_modules(cls) for name, f in vars(m).items()
+    kernels = {(m, name): f for m in kernel_modules() for name, f in vars(m).items()
                if isinstance(f, CPUDispatcher)}
     spent = [0.0]
 
@@ -337,7 +326,7 @@ def python_split(cls, ref: OccupancyGrid, config: UpdaterConfig, calls) -> dict:
 
     for (module, name), fn in kernels.items():
         setattr(module, name, timed(fn))
-    updater, per_scan = cls(ref, config), []
+    updater, per_scan = MapUpdater(ref, config), []
     try:
         for scan, pose, odometry in calls:
             spent[0] = 0.0
@@ -383,75 +372,50 @@ def log_calls(path: Path, parts: int, tmp: Path):
                         Outputs(tmp / "updated.yaml"))
     finally:
         MapUpdater.process = plain_process
-    # update's rules as the code kept from before can run them
-    return first, UpdaterConfig.profile("robot", {**AS_BEFORE}), calls
+    return first, UpdaterConfig.profile("robot"), calls
 
 
-def compare_rows(scans_count: int, pairs: int, logs: bool) -> list[tuple[str, dict]]:
-    """Before and after: the room at 720 and 1440 beams, then the real logs found."""
+def case_rows(scans_count: int, passes: int, logs: bool) -> list[tuple[str, dict]]:
+    """The room at 720 and 1440 beams (the paper's rules, every scan processed), then the
+    real logs found (``mapupdate update``'s configuration)."""
     import tempfile
 
     rows = []
     for beams in (720, 1440):
         calls = [(scan, pose, None) for scan, pose in make_scans(beams, scans_count)]
-        rows.append((f"room, {beams} beams", before_after(
-            reference(200), UpdaterConfig(gating=False), calls, pairs)))
-        rows[-1][1]["split"] = splits(reference(200), UpdaterConfig(gating=False), calls)
+        row = measure(reference(200), UpdaterConfig(gating=False), calls, passes)
+        row["split"] = splits(reference(200), UpdaterConfig(gating=False), calls)
+        rows.append((f"room, {beams} beams, 200 x 200", row))
     for name, (path, parts) in LOGS.items():
         if not logs or not path.exists():
             continue
         with tempfile.TemporaryDirectory() as tmp:
             ref, config, calls = log_calls(path, parts, Path(tmp))
-        row = before_after(ref, config, calls, pairs)
-        row["scans"] = len(calls)
+        row = measure(ref, config, calls, passes)
         row["split"] = splits(ref, config, calls)
         rows.append((f"{name}, 180 beams, {ref.width} x {ref.height}", row))
     return rows
 
 
 def splits(ref: OccupancyGrid, config: UpdaterConfig, calls, passes: int = 5) -> dict:
-    """``python_split`` of the code before and after in alternating passes: the median of
-    the passes' medians."""
-    codes = (("before", BeforeMapUpdater), ("after", MapUpdater))
-    got = {name: [] for name, _ in codes}
-    for _ in range(passes):
-        for name, cls in codes:
-            got[name].append(python_split(cls, ref, config, calls))
-    return {name: {key: float(np.median([p[key] for p in runs])) for key in runs[0]}
-            for name, runs in got.items()}
+    """``python_split`` in ``passes`` passes: the median of the passes' medians."""
+    runs = [python_split(ref, config, calls) for _ in range(passes)]
+    return {key: float(np.median([p[key] for p in runs])) for key in runs[0]}
 
 
-def print_split(rows) -> None:
-    print("The Python around the kernels and the kernels, before and after: median ms per "
-          "processed scan of the whole call, of the kernels called from Python (timers around "
-          "each call: their work and the cost of the call) and of the rest, 5 alternating "
-          "passes each (wall time), the median of the passes:")
+def print_cases(rows, passes: int) -> None:
+    print(f"The updater on mapupdate update's scans, {passes} passes, median ms per processed "
+          f"scan (thread CPU time); the kernels and the Python around them, 5 more passes "
+          f"(wall time, timers around each kernel called from Python):")
     print()
-    print("| case | before: all | kernels | Python | after: all | kernels | Python "
-          "| ratio: kernels | Python |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| case | scans processed | ms | passes | each scan's best pass ms "
+          "| all | kernels | Python |")
+    print("|---|---:|---:|---|---:|---:|---:|---:|")
     for label, r in rows:
-        b, a = r["split"]["before"], r["split"]["after"]
-        print(f"| {label} | {b['all']:.3f} | {b['kernels']:.3f} | {b['Python']:.3f} "
-              f"| {a['all']:.3f} | {a['kernels']:.3f} | {a['Python']:.3f} "
-              f"| {b['kernels'] / a['kernels']:.2f} | {b['Python'] / a['Python']:.2f} |")
-    print()
-
-
-def print_comparison(rows, pairs: int) -> None:
-    print(f"Before (benchmarks/updater_before) and after, {pairs} alternating passes each, "
-          f"median ms per processed scan (thread CPU time), median of the passes:")
-    print()
-    print("| case | before ms | after ms | before / after | bar | same map | passes before "
-          "| passes after | best pass per scan, before / after ms | ratio |")
-    print("|---|---:|---:|---:|---:|---|---|---|---|---:|")
-    for label, r in rows:
-        bar = f">= {SPEEDUP_BAR:.0f}" if not label.startswith("room, 1440") else ""
-        print(f"| {label} | {r['before_ms']:.3f} | {r['after_ms']:.3f} | {r['ratio']:.2f} | "
-              f"{bar} | {'yes' if r['identical'] else 'NO'} | "
-              f"{' / '.join(f'{m:.3f}' for m in r['passes']['before'])} | "
-              f"{' / '.join(f'{m:.3f}' for m in r['passes']['after'])} | "
-              f"{r['best_before_ms']:.3f} / {r['best_after_ms']:.3f} | {r['best_ratio']:.2f} |")
+        s = r["split"]
+        print(f"| {label} | {r['processed']} | {r['ms']:.3f} | "
+              f"{' / '.join(f'{m:.3f}' for m in r['passes'])} | {r['best_ms']:.3f} "
+              f"| {s['all']:.3f} | {s['kernels']:.3f} | {s['Python']:.3f} |")
     print()
 
 
@@ -500,10 +464,11 @@ def other_configs() -> dict:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scans", type=int, default=400)
-    parser.add_argument("--pairs", type=int, default=5,
-                        help="alternating passes of the code before and after, each")
+    parser.add_argument("--passes", "--pairs", type=int, default=5, dest="passes",
+                        help="passes on the scans of mapupdate update (default 5)")
     parser.add_argument("--no-logs", action="store_true", help="the room only")
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
+    add_option(parser)
     args = parser.parse_args()
     if args.memory_child:
         memory_child(args.scans)
@@ -512,23 +477,49 @@ def main() -> int:
     child = subprocess.run([sys.executable, __file__, "--memory-child", "--scans", "100"],
                            check=True, capture_output=True, text=True)
     mem = json.loads(child.stdout.strip().splitlines()[-1])
-    compared = compare_rows(args.scans, args.pairs, not args.no_logs)
+    cases = case_rows(args.scans, args.passes, not args.no_logs)
     rows = []
     for beams, budget in ((720, 1.0), (1440, 2.0)):
         scans = make_scans(beams, args.scans)
         for size in (200, 2000):
             rows.append((beams, size, budget, time_scans(reference(size), scans)))
-    parts = time_parts(reference(200), make_scans(720, args.scans))
-    inner = time_inner(reference(200), make_scans(720, args.scans))
+    parts = internals(time_parts, reference(200), make_scans(720, args.scans))
+    inner = internals(time_inner, reference(200), make_scans(720, args.scans))
 
-    print_comparison(compared, args.pairs)
-    print_split(compared)
+    print_cases(cases, args.passes)
     print_table(rows, parts, inner, mem, args.scans)
-    missed_bar = any(r["ratio"] < SPEEDUP_BAR or not r["identical"]
-                     for label, r in compared if not label.startswith("room, 1440"))
+    figures(cases, rows, mem).write(args.json)
     states = [mem["state_bytes"], *mem["other_states"].values()]
-    missed_bar = missed_bar or max(states) > STATE_BAR
-    return int(missed_bar or any(r["median_ms"] > budget for _, _, budget, r in rows))
+    return int(max(states) > STATE_BAR or any(r["median_ms"] > budget
+                                              for _, _, budget, r in rows))
+
+
+def internals(timer, *args) -> dict:
+    """``timer``'s figures, or none when the code measured lacks the internals it times
+    inside (another revision's, with run.py --baseline)."""
+    try:
+        return timer(*args)
+    except (AttributeError, KeyError, TypeError, ValueError) as e:
+        print(f"({timer.__name__}: not measured on this code: {type(e).__name__}: {e})")
+        return {}
+
+
+def figures(cases, rows, mem) -> Figures:
+    """What run.py --baseline sets beside a revision's: the cases' times and output maps,
+    the room's times per map size and the states' bytes."""
+    out = Figures()
+    for label, r in cases:
+        out.add(f"{label}: median per processed scan", r["ms"], "ms")
+        out.add(f"{label}: each scan's best pass", r["best_ms"], "ms")
+        out.add(f"{label}: kernels (wall)", r["split"]["kernels"], "ms")
+        out.add(f"{label}: Python around them (wall)", r["split"]["Python"], "ms")
+        out.output(f"{label}: output map", r["map"])
+    for beams, size, _, r in rows:
+        out.add(f"room, {beams} beams, {size} x {size}, every scan: median", r["median_ms"], "ms")
+    out.add("2000 x 2000 map: updater state", mem["state_bytes"], "bytes")
+    for label, n_bytes in mem["other_states"].items():
+        out.add(f"2000 x 2000 map, {label}: updater state", n_bytes, "bytes")
+    return out
 
 
 def print_table(rows, parts, inner, mem, scans_count: int) -> None:
@@ -551,7 +542,7 @@ def print_table(rows, parts, inner, mem, scans_count: int) -> None:
     print()
     print("| part | ms | share |")
     print("|---|---:|---:|")
-    total = sum(parts.values())
+    total = sum(parts.values()) or math.nan
     for label, ms in parts.items():
         print(f"| {label} | {ms:.3f} | {ms / total:.0%} |")
     for label, ms in inner.items():

@@ -1,10 +1,12 @@
 """The house rules the code is kept to, checked from the source: the tests reach their helpers
 by name (pytest's ``pythonpath`` in pyproject.toml, shared fixtures in tests/conftest.py), never
 through sys.path or a fallback import; the product imports no test-only package; its
-docstrings and comments name modules where they live."""
+docstrings and comments name modules where they live; no copy of old code is kept in a folder
+of its own."""
 
 import ast
 import io
+import os
 import pathlib
 import re
 import tokenize
@@ -15,11 +17,9 @@ PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlog
             "scenarios", "studies", "mapupdate", "mapstore")
 HELPERS = {p.stem for p in TESTS.glob("*.py")}
 TEST_ONLY = {"pytest", "hypothesis", "filterpy"}        # the ``dev`` extra's, not the product's
-# Files being rewritten in other changes (the speedup and memory tests with their golden files
-# and the script that records them; the ROS 2 fleet test): their path hacks go with those
-# rewrites. Remove a name here once its file is clean.
-KNOWN = {"test_updater_speedup.py", "test_updater_memory.py", "test_localization_speedup.py",
-         "test_pose_check_speedup.py", "test_ros2_fleet.py", "data/golden/record.py"}
+# Files being rewritten in other changes (the ROS 2 fleet test): their path hacks go with
+# those rewrites. Remove a name here once its file is clean.
+KNOWN = {"test_ros2_fleet.py"}
 SYS_PATH_EDIT = re.compile(r"sys\.path\s*(\.\s*(insert|append|extend)\b|\[|\+=|=[^=])")
 
 
@@ -151,3 +151,15 @@ def test_the_moved_module_check_sees_an_old_home():
         == ["1: scenarios.pipeline (a module of robot)"]
     assert moved_mentions("x = 1  # one of robot.methods.METHODS\n") == []
     assert moved_mentions('key = "updater.threshold"\n') == []
+
+
+def test_no_frozen_copy_of_old_code_is_kept():
+    """Old code is in git: a comparison with it takes a revision (``benchmarks/run.py
+    --baseline REV``; the golden files of the bit-for-bit tests, ``tests/data/golden/record.py
+    --rev REV``), not a copy in a folder named ``*_before``."""
+    found = []
+    for folder, subfolders, _ in os.walk(ROOT):
+        subfolders[:] = [d for d in subfolders if not d.startswith(".") and d != "__pycache__"]
+        found += [os.path.relpath(os.path.join(folder, d), ROOT) for d in subfolders
+                  if d.endswith("_before")]
+    assert found == []

@@ -156,35 +156,50 @@ def first_hit(data, gx0, gy0, cos_a, sin_a, max_len, block_unknown):
     t0, t1 = clip_to_box(gx0, gy0, cos_a * max_len, sin_a * max_len, float(width), float(height))
     if t0 > t1:
         return max_len, NO_HIT
-    t = t0 * max_len
-    t_end = t1 * max_len
-    px = gx0 + t * cos_a
-    py = gy0 + t * sin_a
-    cx = _cell_of(px, width)
-    cy = _cell_of(py, height)
-    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
-    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
+    t, t_end, t_safe, cx, cy, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
+        _walk_start(gx0, gy0, cos_a, sin_a, t0, t1, max_len, width, height)
     # While the next crossing lies safely before both the grid exit and max_len, the next cell
     # is inside the grid, so this loop, which takes nearly all of a cast's steps, skips the
     # bounds checks.
-    t_safe = min(t_end, max_len) - 1e-6
     while True:
         if is_blocking(data[cy, cx], block_unknown):
             return t, HIT
-        if t_max_x <= t_max_y:
-            if t_max_x >= t_safe:
-                break
-            t = t_max_x
-            cx += step_x
-            t_max_x += t_delta_x
-        else:
-            if t_max_y >= t_safe:
-                break
-            t = t_max_y
-            cy += step_y
-            t_max_y += t_delta_y
+        done, t, cx, cy, t_max_x, t_max_y = _safe_step(t, cx, cy, t_max_x, t_max_y, step_x,
+                                                      step_y, t_delta_x, t_delta_y, t_safe)
+        if done:
+            break
     return _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x,
                        t_delta_y, t_end, max_len, block_unknown)
+
+
+@njit(cache=True, inline="always")
+def _walk_start(gx0, gy0, cos_a, sin_a, t0, t1, max_len, width, height):
+    """Where a walk (Amanatides and Woo) along the beam clipped to the grid, [t0, t1] of
+    ``max_len``, starts: (t, t_end, t_safe, cx, cy, step_x, step_y, t_delta_x, t_delta_y,
+    t_max_x, t_max_y). Before ``t_safe`` every crossing lies inside the grid and short of
+    ``max_len`` (``_safe_step``)."""
+    t = t0 * max_len
+    t_end = t1 * max_len
+    cx = _cell_of(gx0 + t * cos_a, width)
+    cy = _cell_of(gy0 + t * sin_a, height)
+    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
+    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
+    t_safe = min(t_end, max_len) - 1e-6
+    return t, t_end, t_safe, cx, cy, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y
+
+
+@njit(cache=True, inline="always")
+def _safe_step(t, cx, cy, t_max_x, t_max_y, step_x, step_y, t_delta_x, t_delta_y, t_safe):
+    """The walk's step into the next cell, with no bounds check: (done, t, cx, cy, t_max_x,
+    t_max_y), ``done`` and the walk unchanged when the next crossing is at ``t_safe`` or past
+    it (``_last_steps`` takes the walk from there)."""
+    if t_max_x <= t_max_y:
+        if t_max_x >= t_safe:
+            return True, t, cx, cy, t_max_x, t_max_y
+        return False, t_max_x, cx + step_x, cy, t_max_x + t_delta_x, t_max_y
+    if t_max_y >= t_safe:
+        return True, t, cx, cy, t_max_x, t_max_y
+    return False, t_max_y, cx, cy + step_y, t_max_x, t_max_y + t_delta_y
 
 
 @njit(cache=True, inline="always")
@@ -289,23 +304,18 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
     """``first_hit`` with unknown blocking (the map's outside too), jumping across squares
     of clear blocks (``clear_blocks(data, shift, clear)``) instead of stepping through their
     cells: the same blocking cell, its distance equal up to rounding in the last bits. Its
-    steps between the jumps are ``first_hit``'s, written out again so that ``first_hit`` (the
-    simulator's and the localiser's casts) keeps a loop with no block lookups. The blocks are
-    looked up where the cast starts and wherever a jump lands, and no more once one is not
-    clear: a lookup that finds nothing costs a few steps (a branch the processor cannot
-    foresee), and a cast through clutter would pay for many."""
+    steps between the jumps are ``first_hit``'s (``_walk_start``, ``_safe_step``), in a loop of
+    its own so that ``first_hit`` (the simulator's and the localiser's casts) keeps one with no
+    block lookups. The blocks are looked up where the cast starts and wherever a jump lands,
+    and no more once one is not clear: a lookup that finds nothing costs a few steps (a branch
+    the processor cannot foresee), and a cast through clutter would pay for many."""
     height = data.shape[0]
     width = data.shape[1]
     if not (0.0 <= gx0 < width and 0.0 <= gy0 < height):
         return 0.0, LEFT_GRID
     t0, t1 = clip_to_box(gx0, gy0, cos_a * max_len, sin_a * max_len, float(width), float(height))
-    t = t0 * max_len
-    t_end = t1 * max_len
-    cx = _cell_of(gx0 + t * cos_a, width)
-    cy = _cell_of(gy0 + t * sin_a, height)
-    step_x, t_delta_x, t_max_x = _axis_step(cx, gx0, cos_a)
-    step_y, t_delta_y, t_max_y = _axis_step(cy, gy0, sin_a)
-    t_safe = min(t_end, max_len) - 1e-6
+    t, t_end, t_safe, cx, cy, step_x, step_y, t_delta_x, t_delta_y, t_max_x, t_max_y = \
+        _walk_start(gx0, gy0, cos_a, sin_a, t0, t1, max_len, width, height)
     looking = True
     while True:
         if data[cy, cx] != FREE:
@@ -326,18 +336,10 @@ def first_blocked(data, clear, shift, gx0, gy0, cos_a, sin_a, max_len):
                     t = max(t, t_max_y + (ky - 1) * t_delta_y)
                     t_max_y += ky * t_delta_y
                     cy += ky * step_y
-        if t_max_x <= t_max_y:
-            if t_max_x >= t_safe:
-                break
-            t = t_max_x
-            cx += step_x
-            t_max_x += t_delta_x
-        else:
-            if t_max_y >= t_safe:
-                break
-            t = t_max_y
-            cy += step_y
-            t_max_y += t_delta_y
+        done, t, cx, cy, t_max_x, t_max_y = _safe_step(t, cx, cy, t_max_x, t_max_y, step_x,
+                                                      step_y, t_delta_x, t_delta_y, t_safe)
+        if done:
+            break
     return _last_steps(data, cx, cy, t, t_max_x, t_max_y, step_x, step_y, t_delta_x,
                        t_delta_y, t_end, max_len, True)
 

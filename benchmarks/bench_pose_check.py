@@ -42,8 +42,9 @@ from figures import Figures, add_option  # noqa: E402
 
 
 def record(full: bool, sessions: int | None) -> tuple[list, list]:
-    """Run the main job with ``PoseCheck.verdict`` wrapped: (the checks' maps, the calls
-    (check index, scan, robot pose, mount, covariance, verdict) in order)."""
+    """Run the main job with ``PoseCheck.verdict`` wrapped: (the checks' maps and
+    configurations, the calls (check index, scan, robot pose, mount, covariance, verdict) in
+    order)."""
     from mapupdate.main import main
 
     grids, calls, index = [], [], {}
@@ -52,7 +53,7 @@ def record(full: bool, sessions: int | None) -> tuple[list, list]:
     def wrapped(self, scan, robot_pose, sensor_mount, cov=None):
         if id(self) not in index:
             index[id(self)] = len(grids)
-            grids.append(self._grid_for_bench)
+            grids.append((self._grid_for_bench, self._config_for_bench))
         v = verdict(self, scan, robot_pose, sensor_mount, cov)
         calls.append((index[id(self)], scan, robot_pose, sensor_mount,
                       None if cov is None else np.array(cov), v))
@@ -62,7 +63,7 @@ def record(full: bool, sessions: int | None) -> tuple[list, list]:
 
     def keep_grid(self, grid, config=None):
         init(self, grid, config)
-        self._grid_for_bench = grid
+        self._grid_for_bench, self._config_for_bench = grid, config
 
     live.PoseCheck.__init__, live.PoseCheck.verdict = keep_grid, wrapped
     try:
@@ -82,7 +83,7 @@ def fit_values(fit) -> tuple | None:
 def replay(grids, calls, first: bool) -> tuple[float, list[str], list]:
     """One pass over the calls on fresh checks: (CPU seconds, differences from the main
     job's verdicts, and on the ``first`` pass the verdicts and fits)."""
-    checks = [live.PoseCheck(g) for g in grids]
+    checks = [live.PoseCheck(grid, config) for grid, config in grids]
     spent, diffs, got = 0.0, [], []
     for n, (k, scan, pose, mount, cov, want) in enumerate(calls):
         t0 = time.thread_time()
@@ -119,6 +120,9 @@ def main(argv=None) -> int:
     print(f"{machine()}\n{len(calls)} calls of PoseCheck.verdict on {len(grids)} maps "
           f"({', '.join(f'{kinds.count(v)} {v}' for v in sorted(set(kinds)))}), recorded in "
           f"{time.perf_counter() - t0:.0f} s")
+    if not calls:
+        print("nothing to time: the sessions run made no pose check (the first maps M1)")
+        return 2
     replay(grids, calls[:5], False)           # compile or load before timing
     seconds, diffs, got = [], [], []
     print("| pass | CPU s | ms / call |\n|---|---|---|")

@@ -186,11 +186,10 @@ def time_inner(ref: OccupancyGrid, scans) -> dict:
     names = list(inspect.signature(original.py_func).parameters)
 
     def record(*args):
-        # the inputs as the call found them, the per-beam arrays as it left them
-        got = {k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in zip(names, args)}
+        # the inputs as the call found them, the workspace's per-beam arrays as it left them
+        got = {k: copied(v) for k, v in zip(names, args)}
         out = original(*args)
-        left = {k: np.copy(v) for k, v in zip(names, args) if k in PER_BEAM}
-        seen.append(got | left | beam_views(left))
+        seen.append(got | {"left": copied(args[names.index("work")])})
         return out
 
     updater = MapUpdater(ref, UpdaterConfig(gating=False))
@@ -205,65 +204,57 @@ def time_inner(ref: OccupancyGrid, scans) -> dict:
     return {label: min(r[label] for r in runs) / len(scans) * 1e3 for label in runs[0]}
 
 
+def copied(value):
+    """An array, or a named tuple of arrays, copied; anything else as it is."""
+    if isinstance(value, np.ndarray):
+        return np.copy(value)
+    if isinstance(value, tuple):
+        return type(value)(*(copied(v) for v in value))
+    return value
+
+
 def run_inner(seen, kernels, ref: OccupancyGrid) -> dict:
     """The classifier, the cast and the walks of ``time_inner``'s recorded calls: seconds in
     all, by part (the free walks with the reckoning of where each may start)."""
-    spent = {"classifier (prepare_beams, classify_scan)": 0.0,
+    from updater.steps import Workspace
+
+    spent = {"classifier (run_classifier: prepare_beams, classify_scan)": 0.0,
              "virtual beams cast (cast_virtual)": 0.0, "free walks (walk_beams)": 0.0,
              "removed-obstacle walks (walk_beams)": 0.0}
     marks = np.zeros((ref.data.size + 7) // 8, np.uint8)
     out = np.zeros(ref.data.size + 1, np.int32)
     for kw in seen:
+        cells, lay = kw["cells"], kw["layout"][0]
+        work = copied(kw["work"])
         t0 = CLOCK()
-        classify_alone(kernels, kw)
-        spent["classifier (prepare_beams, classify_scan)"] += CLOCK() - t0
+        kernels.run_classifier(kw["ranges"], kw["sensor"], kw["layout"], kw["settings"], cells,
+                               work)
+        spent["classifier (run_classifier: prepare_beams, classify_scan)"] += CLOCK() - t0
+        beams = {name: row for key, names in Workspace.ROWS
+                 for name, row in zip(names, getattr(kw["left"], key))}
         t0 = CLOCK()
-        kernels.cast_virtual(kw["ref"], kw["clear"], kw["sensor"], kw["virtual"],
-                             kw["max_len"], kw["expected"], kw["out_found"])
+        kernels.cast_virtual(cells.ref, cells.clear, kw["sensor"], beams["virtual"],
+                             lay["max_len"], beams["expected"], work.found)
         spent["virtual beams cast (cast_virtual)"] += CLOCK() - t0
-        skips = np.zeros(len(kw["hits"]))
+        skips = np.zeros(len(beams["hits"]))
+        cap = int(lay["walk_room"])
         for label, reach, want, drop, kind in (
                 ("free walks (walk_beams)", "free_reach", kernels.UNCHANGED, False,
                  kernels.WALK_FREE),
-                ("removed-obstacle walks (walk_beams)", "reach", kernels.CHANGE, True,
+                ("removed-obstacle walks (walk_beams)", "removed_reach", kernels.CHANGE, True,
                  kernels.WALK_BLOCKED)):
-            marks[:] = kw["un_marks"] if kind == kernels.WALK_FREE else 0
+            marks[:] = kw["state"].unchanged_marks if kind == kernels.WALK_FREE else 0
             t0 = CLOCK()
             if kind == kernels.WALK_FREE:
-                kernels.free_walk_skips(kw["sensor"], kw["hits"], kw[reach], kw["verdict"],
-                                        want, abs(kw["increment"]), kw["even"], kw["cap"],
-                                        skips)
-            kernels.walk_beams(kw["ref"], kw["enclosed"], kw["clear"], kw["sensor"],
-                               kw["hits"], kw[reach], select=kw["verdict"], want=want,
-                               drop_last=drop, cap=kw["cap"], kind=kind, marks=marks, out=out,
-                               n=0,
+                kernels.free_walk_skips(kw["sensor"], beams["hits"], beams[reach],
+                                        beams["verdict"], want, abs(lay["angle_increment"]),
+                                        bool(lay["even_wrap"]), cap, skips)
+            kernels.walk_beams(cells.ref, cells.enclosed, cells.clear, kw["sensor"],
+                               beams["hits"], beams[reach], select=beams["verdict"], want=want,
+                               drop_last=drop, cap=cap, kind=kind, marks=marks, out=out, n=0,
                                skip=skips if kind == kernels.WALK_FREE else kernels.NO_SKIPS)
             spent[label] += CLOCK() - t0
     return spent
-
-
-# ``process_scan``'s per-beam arguments: rows of these, named by ``Workspace``
-PER_BEAM = ("floats", "bits", "verdicts", "points", "rays", "out_found")
-
-
-def beam_views(arrays: dict) -> dict:
-    """The per-beam arrays of ``process_scan``'s arguments by name (views of their rows)."""
-    from updater.steps import Workspace
-
-    return {name: row for key, names in Workspace.ROWS for name, row in zip(names, arrays[key])}
-
-
-def classify_alone(kernels, kw) -> None:
-    """Step 1 of a recorded ``process_scan`` call (into its recorded outputs)."""
-    kernels.prepare_beams(kw["ranges"], kw["r_lo"], kw["r_hi"], kw["sensor"], kw["angle_min"],
-                          kw["step"], kw["increment"], kw["ratio"], kw["res"], kw["dist"],
-                          kw["r"], kw["valid"], kw["virtual"], kw["measured"], kw["hits"],
-                          kw["pairing"], kw["tol"], kw["skip"], kw["reach"], kw["free_reach"])
-    kernels.classify_scan(kw["ref"], kw["clear"], kw["sensor"], kw["virtual"], kw["max_len"],
-                          kw["hits"], kw["valid"], kw["pairing"], kw["half_window"],
-                          kw["wrap"], kw["min_run"], kw["n_skip"], kw["expected"],
-                          kw["out_found"], kw["change"], kw["keep"], kw["verdict"],
-                          kw["min_width"])
 
 
 # --- the scans of mapupdate update -----------------------------------------------------------

@@ -1,56 +1,35 @@
-"""Every kernel of updater._kernels against a plain NumPy / Python reference, on seeded random
-input, and the steps of updater.steps where they add something of their own: the per-beam
-distances against docs/algorithm.md's numbers written out here, and the rules that are not in
-the paper (the seen-surface guard, fill_gaps, the hits that confirm M's surfaces) in a
-synthetic room. The references are written
-for clarity, not speed, and share no code with the kernels or the configuration."""
+"""The updater's kernels (gathered in updater._kernels) one by one against a plain NumPy /
+Python reference, on seeded random input, and the classifier's steps of updater.steps where
+they add something of their own: the per-beam distances against docs/algorithm.md's numbers
+written out here. The references are written for clarity, not speed, here or in
+naive_updater.py (the steps written plainly, which test_updater_fused.py sets beside the
+fused scan), and share no code with the kernels or the configuration."""
 
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 import pytest
 
+import naive_updater as naive
 from gridmap import FREE, Pose2D, Scan
 from gridmap import OCCUPIED as OCC
 from gridmap import UNKNOWN as UNK
 from updater import UpdaterConfig, steps
 from updater import _kernels as K
+from updater._arguments import SETTINGS, Buffers
 
 import synthetic_room as world
 
 
 # --- references -------------------------------------------------------------------------------
-def ref_segment_cells(x0, y0, x1, y1, height, width):
-    """Cells (row, col) the segment crosses with positive length, from the start, clipped."""
-    dx, dy = x1 - x0, y1 - y0
-    if dx == 0 and dy == 0:
-        r, c = math.floor(y0), math.floor(x0)
-        return [(r, c)] if 0 <= r < height and 0 <= c < width else []
-    found = []
-    for r in range(max(0, math.floor(min(y0, y1))), min(height, math.floor(max(y0, y1)) + 1)):
-        for c in range(max(0, math.floor(min(x0, x1))), min(width, math.floor(max(x0, x1)) + 1)):
-            t0, t1 = 0.0, 1.0
-            for p, d, lo, hi in ((x0, dx, c, c + 1), (y0, dy, r, r + 1)):
-                if d == 0:
-                    if not lo <= p < hi:
-                        t0, t1 = 1.0, 0.0
-                else:
-                    a, b = (lo - p) / d, (hi - p) / d
-                    t0, t1 = max(t0, min(a, b)), min(t1, max(a, b))
-            if t1 - t0 > 1e-9 or (t1 >= t0 and (c <= x0 < c + 1 and r <= y0 < r + 1)):
-                found.append((t0, r, c))
-    return [(r, c) for _, r, c in sorted(found)]
-
-
 def ref_expected_point(data, x0, y0, a, max_len):
     """March the ray cell by cell: the entry point of the first occupied-or-unknown cell, or the
     point where it leaves the grid; None when nothing blocks within max_len."""
     h, w = data.shape
     x1, y1 = x0 + max_len * math.cos(a), y0 + max_len * math.sin(a)
-    for r, c in ref_segment_cells(x0, y0, x1, y1, h, w):
+    for r, c in zip(*naive.segment_cells(x0, y0, x1, y1, h, w)):
         if data[r, c] != FREE:
             ts = [0.0]
             for p, d, lo, hi in ((x0, math.cos(a), c, c + 1), (y0, math.sin(a), r, r + 1)):
@@ -66,17 +45,6 @@ def ref_expected_point(data, x0, y0, a, max_len):
             ts.append(max((lo - p) / d, (hi - p) / d))
     t = min(ts)
     return x0 + t * math.cos(a), y0 + t * math.sin(a)
-
-
-def ref_disc_is_free(data, px, py, rad):
-    h, w = data.shape
-    for r in range(math.floor(py - rad) - 1, math.floor(py + rad) + 2):
-        for c in range(math.floor(px - rad) - 1, math.floor(px + rad) + 2):
-            qx, qy = np.clip(px, c, c + 1), np.clip(py, r, r + 1)
-            if (qx - px) ** 2 + (qy - py) ** 2 < rad**2:
-                if not (0 <= r < h and 0 <= c < w) or data[r, c] != FREE:
-                    return False
-    return True
 
 
 def ref_popcount(v):
@@ -285,18 +253,6 @@ def test_classifier_verdict_flips_exactly_at_the_pairing_distance(r):
             assert beams.verdict[0] == (K.CHANGE if change else K.UNCHANGED)
 
 
-# --- walks along beams ------------------------------------------------------------------------
-def ref_walk(data, sensor, hit, reach, drop_last):
-    """The cells from the sensor to the point at ``reach`` of the way to the hit."""
-    h, w = data.shape
-    tx = sensor[0] + reach * (hit[0] - sensor[0])
-    ty = sensor[1] + reach * (hit[1] - sensor[1])
-    cells = ref_segment_cells(sensor[0], sensor[1], tx, ty, h, w)
-    if drop_last and 0 <= tx < w and 0 <= ty < h:
-        cells = cells[:-1]
-    return cells
-
-
 def reference_runs(change, hits, min_run, min_width, wrap):
     """Which changes the run filter keeps, written out: split the beams into maximal runs of
     changes (joined across the ends when ``wrap``), keep a run of min_run or more, or of two
@@ -342,38 +298,40 @@ def test_run_filter_against_reference(seed):
     assert K.run_filter(two, 3, False, np.zeros(n, np.bool_), hits, wide * 1.01) == 0
 
 
+# --- walks along beams (walk_scan, one walk per beam) -----------------------------------------
+def walks(data, sensor, hits, verdict, removed_reach, free_reach, cap=300):
+    """The removed-obstacle walks (CHANGE beams) and free walks (UNCHANGED beams) of
+    ``walk_scan``, as a scan runs them but for its shortcuts (no clear blocks, no late
+    starts): (changed cells, unchanged cells), each in the order flagged, and the two marks."""
+    n = len(hits)
+    ch_marks, un_marks = (np.zeros((data.size + 7) // 8, np.uint8) for _ in range(2))
+    changed, unchanged = np.zeros(data.size + 1, np.int32), np.zeros(data.size + 1, np.int32)
+    n_ch, n_un = K.walk_scan(data, np.zeros_like(ch_marks), K.NO_BLOCKS, sensor, hits, verdict,
+                             removed_reach, verdict, free_reach, np.zeros(n), np.zeros(n, bool),
+                             np.zeros(n), K.NO_ENTRIES, cap, ch_marks, un_marks, changed, 0,
+                             unchanged, 0)
+    return changed[:n_ch].tolist(), unchanged[:n_un].tolist(), ch_marks, un_marks
+
+
+def listed(rows_cols, width):
+    rows, cols = rows_cols
+    return (rows * width + cols).tolist()
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_walk_against_reference(seed):
+    """A free walk on a free map lists every cell it crosses, a removed-obstacle walk on an
+    unknown map every cell but its last (sensors off the map too)."""
     rng = np.random.default_rng(seed)
-    data = np.zeros((40, 50), np.int8)
-    cells = np.zeros((2, 200), np.int64)
     for trial in range(500):
         sensor = np.array([rng.uniform(-5, 55), rng.uniform(-5, 45), 0.0])
-        hit = sensor[:2] + rng.uniform(-40, 40, 2)
-        reach, drop_last = rng.uniform(0.2, 1.0), bool(rng.random() < 0.5)
-        n = K.walk(data, sensor, hit, reach, drop_last, cells)
-        got = list(zip(cells[0, :n].tolist(), cells[1, :n].tolist()))
-        assert got == ref_walk(data, sensor, hit, reach, drop_last)
-
-
-@pytest.mark.parametrize("free", [True, False])
-def test_flag_listed_against_reference(free):
-    rng = np.random.default_rng(10 + free)
-    data = random_map(rng, h=20, w=20, p_occ=0.3, p_unk=0.2)
-    marks = np.zeros(50, np.uint8)
-    out = np.zeros(401, np.int32)
-    flag = K.flag_free_listed if free else K.flag_occupied_listed
-    n, expect, seen = 0, [], set()
-    for trial in range(30):
-        count = int(rng.integers(0, 40))
-        cells = np.stack([rng.integers(0, 20, 45), rng.integers(0, 20, 45)]).astype(np.int64)
-        n = flag(data, cells, count, marks, out, n)
-        for r, c in zip(cells[0, :count], cells[1, :count]):
-            if (data[r, c] == FREE) == free and r * 20 + c not in seen:
-                seen.add(r * 20 + c)
-                expect.append(r * 20 + c)
-    assert out[:n].tolist() == expect and len(expect) > 50
-    assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == sorted(expect)
+        hit = (sensor[:2] + rng.uniform(-40, 40, 2))[None, :]
+        reach, drop_last = np.array([rng.uniform(0.2, 1.0)]), bool(rng.random() < 0.5)
+        data = np.full((40, 50), UNK if drop_last else FREE, np.int8)
+        verdict = np.array([K.CHANGE if drop_last else K.UNCHANGED], np.int8)
+        changed, unchanged, _, _ = walks(data, sensor, hit, verdict, reach, reach)
+        expect = listed(naive.walk_cells(sensor, hit[0], reach[0], drop_last, data.shape), 50)
+        assert (changed if drop_last else unchanged) == expect
 
 
 # --- 2./3. evaluators -------------------------------------------------------------------------
@@ -383,73 +341,7 @@ def test_disc_is_free_against_brute_force():
     for trial in range(2000):
         px, py = rng.uniform(-1, 31, 2)
         rad = rng.uniform(0.1, 5)
-        assert K.disc_is_free(data, px, py, rad) == ref_disc_is_free(data, px, py, rad)
-
-
-def ref_flag_new(data, hits, tol, verdict):
-    w = data.shape[1]
-    cells = []
-    for i in range(len(hits)):
-        if verdict[i] == K.CHANGE and ref_disc_is_free(data, hits[i, 0], hits[i, 1], tol[i]):
-            cell = math.floor(hits[i, 1]) * w + math.floor(hits[i, 0])
-            if cell not in cells:
-                cells.append(cell)
-    return cells
-
-
-def ref_flag_removed(data, sensor, hits, reach, verdict):
-    w = data.shape[1]
-    cells = []
-    for i in range(len(hits)):
-        if verdict[i] != K.CHANGE or not reach[i] > 0:
-            continue
-        for rr, cc in ref_walk(data, sensor, hits[i], reach[i], True):
-            if data[rr, cc] != FREE and rr * w + cc not in cells:
-                cells.append(rr * w + cc)
-    return cells
-
-
-def ref_flag_occupied(data, hits, verdict):
-    h, w = data.shape
-    cells = []
-    for i in range(len(hits)):
-        if verdict[i] != K.UNCHANGED:
-            continue
-        r0, c0 = math.floor(hits[i, 1]), math.floor(hits[i, 0])
-        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
-            rr, cc = r0 + dr, c0 + dc
-            if 0 <= rr < h and 0 <= cc < w and data[rr, cc] != FREE and rr * w + cc not in cells:
-                cells.append(rr * w + cc)
-    return cells
-
-
-def ref_flag_hit_surfaces(data, hits, verdict):
-    """Occupied cells among the hit cell and its 4-neighbours of CHANGE and SKIPPED beams whose
-    hit cell is on the map and not free."""
-    h, w = data.shape
-    cells = set()
-    for i in range(len(hits)):
-        r0, c0 = math.floor(hits[i, 1]), math.floor(hits[i, 0])
-        if verdict[i] not in (K.CHANGE, K.SKIPPED) or not (0 <= r0 < h and 0 <= c0 < w) \
-                or data[r0, c0] == FREE:
-            continue
-        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
-            rr, cc = r0 + dr, c0 + dc
-            if 0 <= rr < h and 0 <= cc < w and data[rr, cc] == OCC:
-                cells.add(rr * w + cc)
-    return cells
-
-
-def ref_flag_free(data, sensor, hits, reach, verdict):
-    w = data.shape[1]
-    cells = {}                  # a dict keeps the order of first flags
-    for i in range(len(hits)):
-        if verdict[i] != K.UNCHANGED:
-            continue
-        for rr, cc in ref_walk(data, sensor, hits[i], reach[i], False):
-            if data[rr, cc] == FREE:
-                cells.setdefault(rr * w + cc)
-    return list(cells)
+        assert K.disc_is_free(data, px, py, rad) == naive.disc_is_free(data, px, py, rad)
 
 
 def _evaluator_input(seed):
@@ -467,14 +359,14 @@ def test_flag_changed_kernels_against_reference(seed):
     data[data.shape[0] // 2:] = FREE      # an open half, where new obstacles can be flagged
     tol = np.array([new_obstacle_radius(x) / 0.05 for x in r])
     reach = np.array([1 - removed_skip(x) / x for x in r])
-    marks = np.zeros((data.size + 7) // 8, np.uint8)
-    cells = np.zeros((2, 300), np.int64)
+    removed, _, marks, _ = walks(data, sensor, hits, verdict, reach, np.zeros(len(r)))
     out = np.zeros(5000, np.int32)
-    n = K.flag_removed_obstacles(data, sensor, hits, reach, verdict, marks, cells, out)
-    n_all = K.flag_new_obstacles(data, hits, tol, verdict, marks, out, n)
-    removed = ref_flag_removed(data, sensor, hits, reach, verdict)
-    new = ref_flag_new(data, hits, tol, verdict)
-    assert out[:n].tolist() == removed and sorted(out[n:n_all].tolist()) == sorted(new)
+    out[:len(removed)] = removed
+    n, n_all = len(removed), K.flag_new_obstacles(data, hits, tol, verdict, marks, out,
+                                                  len(removed))
+    new = naive.new_obstacle_cells(data, hits, tol, verdict)
+    assert removed == naive.removed_obstacle_cells(data, sensor, hits, reach, verdict)
+    assert sorted(out[n:n_all].tolist()) == sorted(new)
     assert n > 0 and n_all > n and (reach <= 0).any()     # short beams walk nowhere
     # every listed cell is marked, and only those
     assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == \
@@ -489,13 +381,13 @@ def test_flag_unchanged_kernels_against_reference(seed, free_fraction, free_marg
     hits[:len(occupied)] = occupied[:, ::-1] + 0.5
     reach = np.array([max(free_fraction, 1 - free_margin / x) if 0 < free_margin < x
                       else free_fraction for x in r])
-    marks = np.zeros((data.size + 7) // 8, np.uint8)
-    cells = np.zeros((2, 300), np.int64)
+    _, free, _, marks = walks(data, sensor, hits, verdict, np.zeros(len(r)), reach)
     out = np.zeros(5000, np.int32)
-    n = K.flag_free_unchanged(data, sensor, hits, reach, verdict, marks, cells, out)
+    out[:len(free)] = free
+    n = len(free)
     n_all = K.flag_occupied_unchanged(data, hits, verdict, marks, out, n)
-    assert out[:n].tolist() == ref_flag_free(data, sensor, hits, reach, verdict) and n > 0
-    assert sorted(out[n:n_all].tolist()) == sorted(ref_flag_occupied(data, hits, verdict))
+    assert free == naive.free_cells(data, sensor, hits, reach, verdict) and n > 0
+    assert sorted(out[n:n_all].tolist()) == sorted(naive.occupied_cells(data, hits, verdict))
     assert n_all > n
 
 
@@ -508,7 +400,7 @@ def test_flag_hit_surfaces_kernel_against_reference(seed):
     out = np.zeros(5000, np.int32)
     out[:3] = (7, 8, 9)                                  # flags of the evaluator before it
     n = K.flag_hit_surfaces(data, hits, verdict, marks, out, 3)
-    expect = ref_flag_hit_surfaces(data, hits, verdict)
+    expect = naive.hit_surface_cells(data, hits, verdict)
     assert out[:3].tolist() == [7, 8, 9] and n - 3 == len(expect) > 0
     assert set(out[3:n].tolist()) == expect
     assert sorted(np.flatnonzero(np.unpackbits(marks, bitorder="little"))) == sorted(expect)
@@ -517,35 +409,18 @@ def test_flag_hit_surfaces_kernel_against_reference(seed):
     assert n_again == n
 
 
-def change_beam(sensor, r, hit, cfg):
-    """Beams holding one detected-change beam of range r [m] ending at ``hit`` [grid units],
-    with the distances the steps derive from ``cfg``."""
-    ranges = np.array([r])
-    pairing, tol, skip = steps.beam_distances(ranges, 0.05, cfg)
-    return steps.Beams(np.asarray(sensor, float), ranges, np.array([hit], float), pairing,
-                       tol, skip, np.full(1, cfg.free_fraction), np.array([K.CHANGE], np.int8),
-                       1, 1, 1)
-
-
-def flagged_changed(data, beams):
-    ws = steps.Workspace()
-    ws.for_beams(1, 1, 1000)
-    ws.for_flags(1000)
-    marks = np.zeros((data.size + 7) // 8, np.uint8)
-    n, n_new = steps.flag_changed_cells(data, beams, marks, ws)
-    return ws.changed[:n].tolist(), n_new
-
-
 @pytest.mark.parametrize("r", [0.5, 5.0, 10.0, 15.0])
 def test_new_obstacle_flag_flips_exactly_at_the_new_obstacle_radius(r):
     data = np.zeros((30, 340), np.int8)
     data[21, 320] = OCC                 # the only occupied cell, y in [21, 22)
+    _, tol, _ = steps.beam_distances(np.array([r]), 0.05, UpdaterConfig())
     for factor, flagged in ((1 - 1e-6, False), (1 + 1e-6, True)):
-        hit = (320.5, 21.0 - factor * new_obstacle_radius(r) / 0.05)
-        beams = change_beam((hit[0] - r / 0.05, hit[1], 0.0), r, hit, UpdaterConfig())
-        cells, n_new = flagged_changed(data, beams)
-        hit_cell = math.floor(hit[1]) * 340 + 320
-        assert (cells, n_new) == (([hit_cell], 1) if flagged else ([], 0)), (r, factor)
+        hit = np.array([[320.5, 21.0 - factor * new_obstacle_radius(r) / 0.05]])
+        out = np.zeros(2, np.int32)
+        n = K.flag_new_obstacles(data, hit, tol, np.array([K.CHANGE], np.int8),
+                                 np.zeros((data.size + 7) // 8, np.uint8), out, 0)
+        hit_cell = math.floor(hit[0, 1]) * 340 + 320
+        assert out[:n].tolist() == ([hit_cell] if flagged else []), (r, factor)
 
 
 def test_a_new_obstacle_radius_of_0_flags_no_hit_off_the_map():
@@ -565,16 +440,18 @@ def test_a_new_obstacle_radius_of_0_flags_no_hit_off_the_map():
 def test_removed_obstacle_walk_ends_exactly_at_p_th(r):
     data = np.zeros((10, 340), np.int8)
     data[5, 300] = OCC                  # on the beam, x in [300, 301)
+    _, _, skip = steps.beam_distances(np.array([r]), 0.05, UpdaterConfig())
     for factor, flagged in ((1 - 1e-6, False), (1 + 1e-6, True)):
         # p_th = the hit less the skip: just inside the occupied cell (its last cell, left
         # out), or just past it
-        hit = (301.0 + factor * removed_skip(r) / 0.05, 5.5)
-        beams = change_beam((hit[0] - r / 0.05, 5.5, 0.0), r, hit, UpdaterConfig())
-        cells, _ = flagged_changed(data, beams)
+        hit = np.array([[301.0 + factor * removed_skip(r) / 0.05, 5.5]])
+        sensor = np.array([hit[0, 0] - r / 0.05, 5.5, 0.0])
+        cells, _, _, _ = walks(data, sensor, hit, np.array([K.CHANGE], np.int8),
+                               1.0 - skip / r, np.zeros(1), cap=1000)
         assert (5 * 340 + 300 in cells) == flagged, (r, factor)
 
 
-# --- the rules not in the paper, as steps, in a synthetic room -------------------------------
+# --- a room scene -----------------------------------------------------------------------------
 SOLID = world.Rect(3.0125, 3.0125, 4.0125, 3.6125)     # in M; in the world 0.12 m further north
 HOLLOW = world.Rect(6.5125, 2.5125, 8.0125, 3.5125)    # in M, outline only; gone from the world
 
@@ -598,125 +475,27 @@ def room_scene(seed):
     return ref.data, scan, steps.to_grid(pose, ref.origin, ref.resolution)
 
 
-def unpack(bits, shape):
-    return np.unpackbits(bits, bitorder="little")[:shape[0] * shape[1]].reshape(shape) == 1
-
-
-def ref_seen_surfaces(data, enclosed, hits, verdict, radius, unknown_radius=None):
-    """Cells (H, W) within ``radius`` of a valid hit that are occupied, or within
-    ``unknown_radius`` (default ``radius``) and unknown and not in an enclosed region: the
-    distance from a hit to a cell is to the cell's nearest point."""
-    unknown_radius = radius if unknown_radius is None else unknown_radius
-    rows, cols = np.mgrid[0:data.shape[0], 0:data.shape[1]]
-    near = np.zeros(data.shape, bool)
-    near_unknown = np.zeros(data.shape, bool)
-    for (x, y), v in zip(hits, verdict):
-        if v != K.INVALID:
-            dx = np.maximum.reduce([cols - x, np.zeros(data.shape), x - cols - 1.0])
-            dy = np.maximum.reduce([rows - y, np.zeros(data.shape), y - rows - 1.0])
-            near |= dx**2 + dy**2 <= radius**2
-            near_unknown |= dx**2 + dy**2 <= unknown_radius**2
-    return (near & (data == OCC)) | (near_unknown & (data == UNK) & ~enclosed)
-
-
-@pytest.mark.parametrize("seed, grow", [(0, True), (1, True), (3, True), (0, False)])
-def test_seen_surface_guard_step_against_reference(seed, grow):
-    # growing into the unknown, the guard keeps open unknown cells within one cell of a hit
-    data, scan, sensor = room_scene(seed)
-    cfg = UpdaterConfig(grow_into_unknown=grow)
-    enclosed_bits, _ = steps.enclosed_unknown(data, 10**6)
-    enclosed = unpack(enclosed_bits, data.shape)
-    ws = steps.Workspace()
-    beams = steps.classify_beams(data, scan, sensor, 0.05, cfg, ws)
-    assert beams.changes > 0 and enclosed.sum() > 100
-    marks = np.zeros((data.size + 7) // 8, np.uint8)
-    n_guarded = steps.guard_seen_surfaces(data, beams, cfg, 0.05, marks, enclosed_bits, ws)
-    guarded = ref_seen_surfaces(data, enclosed, beams.hits, beams.verdict, 0.075 / 0.05,
-                                1.0 if grow else None)
-    assert (unpack(marks, data.shape) == guarded).all() and n_guarded == guarded.sum() > 50
-    # the removed-obstacle walk passes the guarded cells by, and only those
-    n, n_new = steps.flag_changed_cells(data, beams, marks, ws)
-    reach = np.array([1 - removed_skip(r) / r for r in beams.ranges])
-    removed = set(ref_flag_removed(data, sensor, beams.hits, reach, beams.verdict))
-    guarded = set(np.flatnonzero(guarded).tolist())
-    new = set(ref_flag_new(data, beams.hits, beams.tol, beams.verdict))
-    flagged = ws.changed[:n].tolist()
-    assert set(flagged) == (removed - guarded) | new and len(set(flagged)) == n
-    assert removed & guarded and removed - guarded        # the guard bites, and not everywhere
-    steps.release_seen_surfaces(marks, n_guarded, ws)
-    assert set(np.flatnonzero(unpack(marks, data.shape)).tolist()) == set(ws.changed[:n].tolist())
-
-
-def ref_gap_cells(data, hits, verdict, k):
-    """Hit cells of agreeing beams with a free square of k cells each way around them in M."""
-    h, w = data.shape
-    cells = set()
-    for (x, y), v in zip(hits, verdict):
-        if v != K.UNCHANGED:
-            continue
-        row, col = math.floor(y), math.floor(x)
-        if k <= row < h - k and k <= col < w - k and \
-                (data[row - k:row + k + 1, col - k:col + k + 1] == FREE).all():
-            cells.add(row * w + col)
-    return cells
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_fill_gaps_step_against_reference(seed):
-    data, scan, sensor = room_scene(seed)
-    cfg = UpdaterConfig(fill_gaps=True)
-    ws = steps.Workspace()
-    beams = steps.classify_beams(data, scan, sensor, 0.05, cfg, ws)
-    marks = np.zeros((data.size + 7) // 8, np.uint8)
-    n, _ = steps.flag_changed_cells(data, beams, marks, ws)
-    before = ws.changed[:n].tolist()
-    n_all, n_gaps = steps.fill_gaps(data, beams, cfg, 0.05, marks, ws, n)
-    gaps = ref_gap_cells(data, beams.hits, beams.verdict, 1) - set(before)
-    assert ws.changed[:n].tolist() == before and n_gaps == n_all - n == len(gaps) > 0
-    assert set(ws.changed[n:n_all].tolist()) == gaps
-    # agreeing beams walk their free cells to 0.075 m short of the hit where that is further
-    # than 98 % of the range (beyond 3.75 m); checked on a seeded random sixth of the beams
-    reach = np.array([max(0.98, 1 - 0.075 / r) if r > 0.075 else 0.98 for r in beams.ranges])
-    some = np.random.default_rng(seed).random(len(reach)) < 1 / 6
-    beams.verdict[~some & (beams.verdict == K.UNCHANGED)] = K.SKIPPED
-    assert ((reach > 0.98) & (beams.verdict == K.UNCHANGED)).sum() > 10
-    n_un = steps.flag_unchanged_cells(data, beams, np.zeros_like(marks), ws)
-    expect = ref_flag_free(data, sensor, beams.hits, reach, beams.verdict) + \
-        ref_flag_occupied(data, beams.hits, beams.verdict)
-    assert sorted(ws.unchanged[:n_un].tolist()) == sorted(expect)
-
-
 # --- buffers and decision ---------------------------------------------------------------------
-def ref_decide_all(hist, data, mask, threshold, support, seen=None, few=0):
-    n = np.vectorize(lambda v: ref_popcount(int(v) & mask))(hist)
-    changed = n >= threshold
-    if few:
-        occ = data == OCC
-        conf = occ & (seen > 0) & (n < np.minimum(seen, ref_popcount(mask)))
-        pad = np.pad(conf, 1)
-        h, w = data.shape
-        near_conf = np.zeros_like(conf)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                if dr or dc:
-                    near_conf |= pad[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-        changed |= (n >= few) & (seen < threshold) & (n == seen) & ~(occ & near_conf)
-    if support:
-        # the paper's two states (free / occupied-or-unknown), or with support 2 M's values
-        occ = data.astype(int) if support == 2 else data != FREE
-        strong = n >= threshold
-        h, w = data.shape
-        s = np.zeros_like(n)
-        pad_strong = np.pad(strong, 1)
-        pad_occ = np.pad(occ, 1)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                if dr or dc:
-                    nb_strong = pad_strong[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-                    nb_occ = pad_occ[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-                    s += nb_strong & (nb_occ == occ)
-        changed |= n + s >= threshold
-    return changed
+def rule(few, support, shift, mask=0x3FF, threshold=7):
+    """A ``SETTINGS`` record holding the decision rule's parameters (the others 0)."""
+    out = np.zeros(1, SETTINGS)
+    out["buffer_mask"], out["threshold"], out["unanimous_min"] = mask, threshold, few
+    out["support_mode"], out["count_shift"], out["settled_bound"] = \
+        int(support), shift, K.NEVER_SETTLED
+    return out
+
+
+def rule_config(few, support):
+    """The same rule as an ``UpdaterConfig`` (N_b 10, T 7), for the plain decision."""
+    return UpdaterConfig(unanimous_min=few, neighbour_support=bool(support),
+                         support_exact_state=support == 2)
+
+
+def buffers(hist, seen, decided, ch_marks, un_marks):
+    """``Buffers`` without hit buffers (the growth into the unknown off)."""
+    return Buffers(hist, seen, decided, ch_marks, un_marks, np.zeros(0, np.uint8),
+                   np.zeros(0, np.uint8), np.full((0, 0), -1, np.int32),
+                   np.zeros((0, 4096), np.uint16), np.zeros(1, np.int64))
 
 
 def test_push_flags_against_reference():
@@ -821,8 +600,8 @@ def test_decide_incremental_equals_full_map(support, few, packed, skip):
             left_out += n_all - K.push_flags(hist.copy(), seen.copy(), flat, ch, un, 0x3FF, 7,
                                              few, *[m.copy() for m in marks], moved,
                                              shift=shift, decided=kept[2])
-            count += K.push_and_decide(hist, seen, flat, decided, ch, un, 0x3FF, 7, few,
-                                       support, 30, *marks, moved, shift)
+            count += K.push_and_decide(buffers(hist, seen, decided, *marks), flat, 30, ch, un,
+                                       moved, rule(few, support, shift))
             assert (kept[0] == hist).all() and (kept[1] == seen).all()   # the same buffers
             # the changed-flag marks left on the cells full of changes, and on those alone
             full = (hist & 0x3FF) == 0x3FF
@@ -833,8 +612,7 @@ def test_decide_incremental_equals_full_map(support, few, packed, skip):
             count += K.decide(hist, seen, flat, decided, moved[:n], 30, 0x3FF, 7, few,
                               support, shift=shift)
         counts = hist >> 10 if packed else seen
-        expect = ref_decide_all(hist.reshape(30, 30), data, 0x3FF, 7, support,
-                                counts.reshape(30, 30).astype(int), few)
+        expect = naive.decide_all(hist, counts.astype(int), data, rule_config(few, support))
         got = np.unpackbits(decided, bitorder="little")[:900].reshape(30, 30).astype(bool)
         assert (got == expect).all() and count == expect.sum()
         peak = max(peak, count)
@@ -918,32 +696,6 @@ def test_unanimous_rule_keeps_a_grazed_cell_of_a_surface_the_scans_still_hit():
 
 
 # --- output and last check --------------------------------------------------------------------
-def ref_enclosed(data, max_cells):
-    h, w = data.shape
-    seen = np.zeros_like(data, bool)
-    out = np.zeros_like(data, bool)
-    for r in range(h):
-        for c in range(w):
-            if data[r, c] >= 0 or seen[r, c]:
-                continue
-            comp, queue = [], deque([(r, c)])
-            seen[r, c] = True
-            while queue:
-                y, x = queue.popleft()
-                comp.append((y, x))
-                for dy in (-1, 0, 1):
-                    for dx in (-1, 0, 1):
-                        yy, xx = y + dy, x + dx
-                        if 0 <= yy < h and 0 <= xx < w and not seen[yy, xx] and data[yy, xx] < 0:
-                            seen[yy, xx] = True
-                            queue.append((yy, xx))
-            border = any(y in (0, h - 1) or x in (0, w - 1) for y, x in comp)
-            if not border and len(comp) <= max_cells:
-                for y, x in comp:
-                    out[y, x] = True
-    return out
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_enclosed_unknown_against_bfs(seed):
     from updater.steps import enclosed_unknown
@@ -953,7 +705,7 @@ def test_enclosed_unknown_against_bfs(seed):
     for max_cells in (3, 20, 10**6):
         bits, marked = enclosed_unknown(data, max_cells)
         got = np.unpackbits(bits, bitorder="little")[:data.size].reshape(data.shape).astype(bool)
-        expect = ref_enclosed(data, max_cells)
+        expect = naive.enclosed_regions(data, max_cells)
         assert (got == expect).all() and marked == expect.sum()
     assert expect.any()
 
@@ -972,21 +724,6 @@ def test_enclosed_unknown_diagonal_leak_is_not_enclosed():
     assert marked == 0
 
 
-def ref_apply(data, decided, enclosed, close):
-    out = data.copy()
-    out[decided & (data == FREE)] = OCC
-    out[decided & (data != FREE)] = FREE
-    if close:
-        freed = np.pad(decided & (data != FREE), 1)
-        h, w = data.shape
-        near = np.zeros_like(decided)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                near |= freed[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-        out[near & enclosed & ~decided] = OCC
-    return out
-
-
 @pytest.mark.parametrize("close", [False, True])
 def test_apply_changes_against_reference(close):
     rng = np.random.default_rng(8)
@@ -997,7 +734,7 @@ def test_apply_changes_against_reference(close):
     out = data.reshape(-1).copy()
     closed = K.apply_changes(data.reshape(-1), pack(decided), pack(enclosed), 41, close,
                              np.zeros(0, np.uint16), out)
-    expect = ref_apply(data, decided, enclosed, close)
+    expect = naive.output_map(data, decided, enclosed, UpdaterConfig(last_check=close))
     assert (out.reshape(data.shape) == expect).all()
     assert closed == ((expect == OCC) & (data == UNK) & ~decided).sum()
     assert closed > 0 if close else closed == 0

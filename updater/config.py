@@ -140,18 +140,18 @@ class UpdaterConfig:
     radius_far_range: float = 10.0           # [m]
     removed_skip_fraction: float = 0.02      # p_th lies short of the hit by max(fraction * r,
     removed_skip_min: float = 0.15           # [m]                              this)
-    # Not in the paper (_kernels.skip_across): that skip measured across the surface the beam
+    # Not in the paper (_classify.skip_across): that skip measured across the surface the beam
     # hits, not along the beam (the skip over the sine of the angle between beam and surface,
     # from the hits of the beam's neighbours). A beam grazing a wall at 10 deg otherwise walks
     # to within 3 cm of it across, and a pose that far off walks it through the wall's face.
     removed_skip_across: bool = False
-    # Not in the paper (steps.guard_seen_surfaces): an occupied cell of M (or an unknown one
+    # Not in the paper (_flags.mark_seen_surfaces): an occupied cell of M (or an unknown one
     # outside the enclosed regions) within this distance of the hit point of any valid beam of
     # the scan (a surface the scan sees) gets no removed-obstacle flag from that scan. Under a
     # pose error below a cell the rays that graze an object's corner cross its outline cells
     # while the beams that hit the object say it is still there (docs/choices.md).
     seen_surface_radius: float = 0.075       # [m]; 0: off
-    # Not in the paper (steps.fill_gaps): a hit that pairs with M but lands in a cell with
+    # Not in the paper (_flags.flag_gaps): a hit that pairs with M but lands in a cell with
     # nothing of M within fill_gaps_clearance also gets a changed flag. The pairing distance
     # D(r) otherwise hides the gaps of a face that an earlier session mapped only in pieces
     # (docs/choices.md, "fill_gaps").
@@ -159,21 +159,23 @@ class UpdaterConfig:
     fill_gaps_clearance: float = 0.05        # [m] free square around the hit cell, each way
     fill_gaps_free_margin: float = 0.075     # [m] free flags of agreeing beams this short of
                                              # the hit, with fill_gaps
-    # Not in the paper (steps.grow_into_unknown): the map grows into M's open unknown space
-    # (unknown, outside the enclosed regions): cells that beams looking into it see through
-    # become free by their changed flags, cells hit become occupied by hit buffers of N_b flags
-    # and the threshold T. Without it, a partly mapped place stays as unknown as M had it.
+    # Not in the paper (_walks.unknown_walks, _flags.list_unknown_hits, _buffers.push_hits):
+    # the map grows into M's open unknown space (unknown, outside the enclosed regions): cells
+    # that beams looking into it see through become free by their changed flags, cells hit
+    # become occupied by hit buffers of N_b flags and the threshold T. Without it, a partly
+    # mapped place stays as unknown as M had it.
     grow_into_unknown: bool = False          # on in mapupdate update and the ROS node
-    # Not in the paper (steps.removed_select): a beam skipped beside a kept change (within
-    # n_skip of it) also walks for removed obstacles: the occupied cells of M it passes through
-    # before p_th get changed flags. Such a beam pairs, within the window, with a point past
-    # the object, so the paper gives the sides of a removed object no flag from it. Off in
-    # every default: with pose noise the same walks wear the edges of walls.
+    # Not in the paper (``skipped_as_change`` in _scan.process_scan): a beam skipped beside a
+    # kept change (within n_skip of it) also walks for removed obstacles: the occupied cells
+    # of M it passes through before p_th get changed flags. Such a beam pairs, within the
+    # window, with a point past the object, so the paper gives the sides of a removed object
+    # no flag from it. Off in every default: with pose noise the same walks wear the edges of
+    # walls.
     walk_skipped_beams: bool = False
     # --- 3. Unchanged-cells evaluator ---------------------------------------------------------
     n_skip: int = 2                          # [beams] no unchanged flags this near a change
     free_fraction: float = 0.98              # free cells up to this fraction of the range
-    # Not in the paper (steps.flag_hit_surfaces): a detected change, or a beam within n_skip of
+    # Not in the paper (_flags.flag_hit_surfaces): a detected change, or a beam within n_skip of
     # one, whose hit lands in a cell M has as occupied or unknown gives the occupied cells of M
     # among that cell and its 4-neighbours an unchanged flag, as an agreeing beam would. A cell
     # the session keeps hitting is then not freed by the walks of other scans, also where M is
@@ -183,7 +185,7 @@ class UpdaterConfig:
     buffer_size: int = 10                    # N_b flags per cell
     threshold: int = 7                       # T: changed when n_c (+ support) reaches this
     neighbour_support: bool = True           # count 8-neighbours of the same state with n >= T
-    # Not in the paper (_kernels.same_state): the support counts only neighbours of the same
+    # Not in the paper (_decide.same_state): the support counts only neighbours of the same
     # value of M. The paper's two states put unknown with occupied, so where the map grows
     # into the unknown, the unknown cells in front of a wall, seen through as the scans reach
     # the wall, lend the wall's cells their support and free them.
@@ -192,7 +194,7 @@ class UpdaterConfig:
     # a recording that keeps a scan a metre) is changed when every one of its flags says
     # changed and there are at least this many. A later contrary flag undoes it. 0: off.
     unanimous_min: int = 0
-    # Not in the paper (steps.spread_freed): a removed object is freed as a whole. An occupied
+    # Not in the paper (_output.spread_freed): a removed object is freed as a whole. An occupied
     # cell of M next to one the rule freed (or to one freed this way), every flag of which says
     # changed, is freed too, however few its flags, within an 8-connected structure of
     # occupied cells of M of at most spread_max_area none of which the scans still see (an
@@ -202,7 +204,7 @@ class UpdaterConfig:
     spread_removed: bool = False
     spread_max_area: float = 1.0             # [m^2] of occupied cells: larger structures of M
                                              # (walls) get no spread
-    # Not in the paper (steps.keep_beside_standing): an occupied cell of M is freed only if
+    # Not in the paper (_output.keep_beside_standing): an occupied cell of M is freed only if
     # none of its 8-neighbours stands: occupied in M and kept occupied by the output, or
     # unknown in M and reached by no flag. A face cell that an object covers by a sliver,
     # grazed by beams that pass through the rest of it, and a wall cell worn by a pose a few

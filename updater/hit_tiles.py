@@ -5,7 +5,7 @@ A hit buffer is two bytes a cell, as many as the flag buffers, but only the cell
 ends in M's open unknown space ever use one: the surfaces of the places the map did not know.
 A tile directory (an int32 per tile, -1 where there is no tile yet) points into a pool of
 tiles that grows by doubling; the kernels address a cell through both
-(``_kernels.hit_slot``). Empty, the buffers of a 2000 x 2000 map take 4 KB instead of 8 MB.
+(``_buffers.hit_slot``). Empty, the buffers of a 2000 x 2000 map take 4 KB instead of 8 MB.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class HitTiles:
         self.directory = np.full((n_rows, n_cols), -1, np.int32)
         self.pool = np.zeros((0, TILE_CELLS), np.uint16)
         # tiles of the pool in use, in an array so that a kernel can make tiles while the pool
-        # has room (``_kernels.make_hit_tiles``); the rows past them are all zero
+        # has room (``_buffers.make_hit_tiles``); the rows past them are all zero
         self.count = np.zeros(1, np.int64)
 
     @property

@@ -54,6 +54,7 @@ from gridmap.config import DEFAULT_PROFILE
 from gridmap.files import FileInputError, check_regular_file
 
 from . import saved_state, steps
+from ._arguments import Buffers, MapCells
 from .config import UpdaterConfig, UpdaterError
 from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
 from .hit_tiles import HitTiles
@@ -168,6 +169,8 @@ class MapUpdater:
         if config.last_check:
             max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
+        self._cells = MapCells(self._ref, self._clear, self._enclosed)
+        self._state: Buffers | None = None      # the buffers as the kernels take them
         self._n_changed = 0
         # with gate_confirm_once: the cells held-back scans confirmed since the last processed
         # scan (sorted), so that the scans held back between two views confirm a cell once
@@ -211,10 +214,8 @@ class MapUpdater:
 
         # the guard, fill_gaps, the growth into the unknown and the hits that confirm M's
         # surfaces (flag_hit_surfaces) are not in the paper
-        n_valid, raw, kept, flags = steps.process_scan(
-            ref, scan, sensor, res, cfg, ws, self._clear,
-            (self._ch_marks, self._un_marks, self._hit_marks), self._enclosed,
-            (self._hist, self._seen, self._decided), self._hits, self._drawn)
+        n_valid, raw, kept, flags = steps.process_scan(scan, sensor, res, cfg, ws, self._cells,
+                                                       self._buffers(), self._hits)
         self._counts["processed"] += 1
         if flags is None:
             self._counts["lost"] += 1
@@ -267,10 +268,19 @@ class MapUpdater:
 
     def _push_and_decide(self, n_changed: int, n_unchanged: int) -> None:
         """The scan's flags listed in the workspace into the buffers, then the decision."""
-        self._n_changed += steps.push_and_decide(
-            self._hist.reshape(-1), self._seen.reshape(-1), self._ref.reshape(-1),
-            self._decided, n_changed, n_unchanged, self._ref.shape[1], self.config, self._res,
-            self._ch_marks, self._un_marks, self._ws)
+        self._n_changed += steps.push_and_decide(self._buffers(), self._ref, n_changed,
+                                                 n_unchanged, self.config, self._res, self._ws)
+
+    def _buffers(self) -> Buffers:
+        """The state a scan changes, as the kernels take it (``_arguments.Buffers``): made
+        again after a load, or when the hit buffers' pool grew (``HitTiles.make``)."""
+        got = self._state
+        if got is None or got.tile_pool is not self._hits.pool:
+            got = self._state = Buffers(
+                self._hist.reshape(-1), self._seen.reshape(-1), self._decided, self._ch_marks,
+                self._un_marks, self._hit_marks, self._drawn, self._hits.directory,
+                self._hits.pool, self._hits.count)
+        return got
 
     def _placed_pose(self, sensor_pose: Pose2D, pose_check):
         """(pose, its grid coordinates, None, "") for a scan to process: the given sensor pose,
@@ -460,6 +470,7 @@ class MapUpdater:
             self._restore_counts(path, hist, seen)
         self._un_marks = steps.settled_marks(self._ref, self._hist, self.config)
         self._ch_marks = steps.full_marks(self._hist, self.config)
+        self._state = None
         ref = self._ref.reshape(-1)
         self._decided, self._n_changed = steps.decide_all(self._hist.reshape(-1),
                                                           self._seen.reshape(-1), ref,

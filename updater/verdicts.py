@@ -1,8 +1,8 @@
 """What the classifier makes of each beam of a scan (``ScanReport.verdicts``, one per beam).
 
-The kernels store these as int8 codes in per-beam arrays; ``updater._kernels`` takes its int
+The kernels store these as int8 codes in per-beam arrays; ``updater._shared`` takes its int
 constants from here, so the codes are defined once. numba compiles them into the cached
-kernels, and its cache notices changes to the kernels' own file only: a code changed here
+kernels, and its cache notices changes to the kernels' own files only: a code changed here
 needs ``updater/__pycache__`` cleared.
 """
 

@@ -5,8 +5,9 @@ per-beam arrays the kernels name inside a scan (``Beams``, ``OwnRays``).
 
 Why records for the scalars and named tuples for the arrays: numba types a named tuple's
 every field at every call (about 0.1 µs a field, and 0.5 µs a tuple), a structured array in
-one look-up, and a scan past the gate is one call of a few hundred µs. The kernels read both
-alike (``settings.threshold``, ``cells.ref``). Units: [m] metres, [rad] radians, [grid
+one look-up, and a scan past the gate is one call of a few hundred µs. A kernel takes a
+record out of its array once (``st = settings[0]``) and then reads both alike
+(``st.threshold``, ``cells.ref``). Units: [m] metres, [rad] radians, [grid
 units] lengths in cells, (gx, gy) = ((x - ox) / res, (y - oy) / res); a cell is addressed by
 its flat index ``row * width + col``; a bit plane holds a bit per cell, eight to a byte
 (``bits[idx >> 3] >> (idx & 7)``). Symbols are docs/algorithm.md's.
@@ -33,7 +34,8 @@ LAYOUT = np.dtype([
     ("half_window", np.int64),        # [virtual beams] the comparison window's half width
     ("wrap", np.bool_),               # the scan covers 360 deg: window and run filter wrap round
     ("even_wrap", np.bool_),          # ... evenly spaced across its ends too (free walks' skips)
-    ("walk_room", np.int64),          # [cells] the most cells one walk lists: 2 max_len + 8
+    ("walk_room", np.int64),          # [cells] the most cells one walk lists: 2 max_len + 8,
+                                      # or the workspace's room if larger
 ], align=True)
 
 # The range-dependent distances' parameters, in this order, as ``UpdaterConfig`` names them

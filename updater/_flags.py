@@ -24,8 +24,6 @@ from ._walks import free_walk_skips, unknown_walks, walk_scan
 
 
 # --- new obstacles (Sec. IV-B) ----------------------------------------------------------------
-
-
 @njit(cache=True)
 def disc_is_free(ref, px, py, rad):
     """True when every cell of ``ref`` that meets the open disc of radius ``rad`` (grid units)

@@ -17,6 +17,12 @@ module                 step
 This module only gathers their names, for the Python side (``steps.kernels()``, which imports
 it on first use so that numba is not imported with the package) and for the tests. What the
 kernels take is documented in ``_arguments``.
+
+numba's cache (``cache=True``) compiles a kernel again when its own file changes, not when a
+file it imports from does: a kernel of ``_flags`` keeps what it inlined of ``_shared`` or
+``_walks``. After changing a module the others import from (``_shared``, ``_walks``,
+``_classify``, ``_buffers``, ``verdicts``, ``hit_tiles``' TILE_SHIFT, gridmap's kernels),
+clear ``updater/__pycache__``.
 """
 
 from ._buffers import (HIT_TILE_MASK, NEVER_SETTLED, decide_drawn, hit_slot,  # noqa: F401

@@ -14,8 +14,8 @@ from gridmap.cells import FREE, OCCUPIED
 from ._arguments import Beams, OwnRays
 from .verdicts import BeamVerdict
 
-# The blocks of ``clear_blocks`` (gridmap): 8 x 8 cells, 1/64 byte a cell. Here, not in gridmap:
-# numba compiles it in, and a cached kernel is compiled again only when its own file changes.
+# The blocks of ``clear_blocks`` (gridmap): 8 x 8 cells, 1/64 byte a cell. numba compiles it
+# into the kernels that read it (``_kernels``' docstring: what that means for their cache).
 CLEAR_SHIFT = 3
 
 # The per-beam verdicts as plain ints, which numba compiles in as constants.

@@ -194,7 +194,7 @@ class MapUpdater:
         pose, e.g. ``sensor_pose`` matched to M, is used instead) or refused (the scan is a
         counted skip that, like a lost scan, does not advance the gate)."""
         self._check_input(scan, sensor_pose, odometry)
-        cfg, ref, res, ws = self.config, self._ref, self._res, self._ws
+        cfg, res, ws = self.config, self._res, self._ws
         self._counts["scans"] += 1
         t = float(scan.time)
         gate_pose = sensor_pose if odometry is None else odometry

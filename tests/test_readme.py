@@ -74,7 +74,7 @@ def check_outputs(folder: Path, said: dict[str, str]) -> None:
     scores = said["Does it find changes on your recordings?"]
     assert "removed" in scores and "added" in scores
     versions = said["Map versions for a fleet: review and roll back"]
-    assert "v2  approved      v1" in versions and (runs / "site.yaml").exists()
+    assert "v2  approved        v1" in versions and (runs / "site.yaml").exists()
     if not ros1_tools.missing():
         assert (runs / "live.yaml").exists()
     if not ros2_tools.missing_tf():

@@ -156,7 +156,7 @@ def replay(rec: Recording, poses: np.ndarray, guard=None, config=None) -> Damage
     """Feed the recorded scans to a fresh updater on M1 at ``poses``; score the output.
     ``config``: the updater's configuration (None: the paper profile's)."""
     import evaluation as ev
-    from robot.pipeline import RobotPipeline
+    from onboard.pipeline import RobotPipeline
     from updater import MapUpdater
 
     upd = MapUpdater(rec.reference, config, profile="paper")

@@ -52,8 +52,8 @@ def one_case(job):
     from evaluation.edited_world import make_case
     from gridmap import load_map
     from robotlogs import log_observations
-    from robot.logmap import map_from_log
-    from robot.replay import LogSource, Outputs, update_from_log
+    from onboard.logmap import map_from_log
+    from onboard.replay import LogSource, Outputs, update_from_log
 
     name, seed, people, work, overrides, methods = job
     log = DATA / f"{name}.log.gz"
@@ -81,7 +81,7 @@ def one_case(job):
 def method_placement(method: str, overrides: dict):
     """(Placement, updater configuration) of a method: its profile's, the keys of
     ``overrides`` over the robot profile's updater (``pc.KEY``: over its pose check's)."""
-    from robot.replay import Placement
+    from onboard.replay import Placement
     from localization.confidence import PoseCheckConfig
     from updater import UpdaterConfig
 
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.logs:                       # maps first, once each
-            from robot.logmap import map_from_log
+            from onboard.logmap import map_from_log
             map_from_log(DATA / f"{name}.log.gz", Path(tmp) / f"{name}.yaml", progress=False)
         jobs = [(n, s, p, tmp, overrides, args.methods) for n in args.logs for s in args.seeds
                 for p in args.people]
@@ -146,7 +146,7 @@ def partly_mapped(job, profile: str = "robot"):
     from gridmap import OCCUPIED, load_map, save_map
     from gridmap.mapping import build_map
     from robotlogs.carmen import read_carmen
-    from robot.replay import LogSource, Outputs, update_from_log
+    from onboard.replay import LogSource, Outputs, update_from_log
 
     name, work, overrides = job
     log, work = DATA / f"{name}.log.gz", Path(work)

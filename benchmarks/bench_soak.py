@@ -349,14 +349,14 @@ def main(argv=None) -> int:
                     help="the runner's pose check (default on, as in the runner)")
     ap.add_argument("--fill-gaps", action="store_true", help="the updater's fill_gaps on")
     ap.add_argument("--method", default="paper",
-                    help="what updates the map (robot.methods: paper, none, remap, fuse, "
+                    help="what updates the map (onboard.methods: paper, none, remap, fuse, "
                          "hybrid)")
     ap.add_argument("--lane-margin", type=float, default=LANE_MARGIN,
                     help=f"[m] clear space beside the robot's path, beyond its radius, that "
                          f"moved objects keep (default {LANE_MARGIN}; 0: the scenario checks "
                          f"only)")
     args = ap.parse_args(argv)
-    from robot.methods import check_method
+    from onboard.methods import check_method
 
     check_method(args.method, "--method")      # before minutes of generation
     t0 = time.perf_counter()

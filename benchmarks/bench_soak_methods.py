@@ -1,6 +1,6 @@
 """The 50-session soak (``bench_soak.py``) for each method, side by side: the same random
 rearrangements, people and seeds, the map updated by the paper's method or by a baseline
-(``robot.methods``), each chaining its own maps from session to session.
+(``onboard.methods``), each chaining its own maps from session to session.
 
 Per method, over the sessions after the first: precision and recall (mean and least-squares
 trend per session), recall on the targets the session's own moves made, target cells, ghosts,
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=2024, help="seed of the rearrangements")
     ap.add_argument("--methods", default="paper,hybrid,fuse,remap,none")
     args = ap.parse_args(argv)
-    from robot.methods import check_method
+    from onboard.methods import check_method
 
     methods = [check_method(m.strip(), "--methods") for m in args.methods.split(",")]
     t0 = time.perf_counter()

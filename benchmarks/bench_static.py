@@ -6,7 +6,7 @@ profile (the paper and its authors' code), with the figures a user of either wou
 **sim**: generated warehouses (``mapupdate generate``: several seeds and sizes) played in the
 simulator: W1 maps the warehouse (M1), W2 rearranges it while people walk and is recorded as a
 bag (the localiser's ``map -> odom`` in it, as a robot records amcl's). The bag is replayed
-through the robot's update (``robot.replay.replay_observations``, what ``mapupdate update``
+through the robot's update (``onboard.replay.replay_observations``, what ``mapupdate update``
 runs) for each variant of the recording:
 
 - the lidar: 360 deg with 720 beams, or 270 deg with 1081;
@@ -244,7 +244,7 @@ def placement_for(name: str, source: str):
     """(Placement, updater configuration or None) of a profile of the sim part: ``paper`` and
     ``robot`` as ``mapupdate update --profile`` runs them, ``before`` the rules of ``BEFORE``
     without the pose check."""
-    from robot.replay import Placement
+    from onboard.replay import Placement
     from updater import UpdaterConfig
 
     from localization.confidence import PoseCheckConfig
@@ -264,7 +264,7 @@ def placement_for(name: str, source: str):
 def one_world(job) -> list[dict]:
     from evaluation import scores as ev
     from gridmap import load_map
-    from robot.replay import replay_observations
+    from onboard.replay import replay_observations
     from robotlogs import log_observations
     from sim.groundtruth import grid_frame
     from sim.scenario import load_scenario
@@ -356,7 +356,7 @@ def edited_part(args) -> tuple[list, int]:
         return [], 0
     seeds = (0,) if args.quick else (0, 1, 2)
     with tempfile.TemporaryDirectory() as tmp:
-        from robot.logmap import map_from_log
+        from onboard.logmap import map_from_log
 
         for name in rc.LOGS:
             map_from_log(rc.DATA / f"{name}.log.gz", Path(tmp) / f"{name}.yaml", progress=False)
@@ -441,7 +441,7 @@ def one_split(job) -> dict:
         import bench_real_changes as rc
 
         with tempfile.TemporaryDirectory() as tmp:
-            from robot.logmap import map_from_log
+            from onboard.logmap import map_from_log
 
             log = name.split(":", 1)[1]
             map_from_log(rc.DATA / f"{log}.log.gz", Path(tmp) / f"{log}.yaml", progress=False)
@@ -456,8 +456,8 @@ def one_split(job) -> dict:
 def _split(name: str, part: str, profile: str) -> dict:
     from gridmap import FREE, OCCUPIED, save_map
     from gridmap.mapping import build_map
-    from robot.logmap import _placed_scans, map_frame
-    from robot.replay import LogSource, Outputs, Placement, update_from_log
+    from onboard.logmap import _placed_scans, map_frame
+    from onboard.replay import LogSource, Outputs, Placement, update_from_log
     from robotlogs import log_observations
     from gridmap import load_map
 
@@ -489,8 +489,8 @@ def _sena(profile: str) -> dict:
     """SENA's keyframe map updated from the raw odometry log by the localiser started over the
     whole map: the same place at the same time, so every occupied cell stands."""
     from gridmap import FREE, OCCUPIED, load_map
-    from robot.logmap import map_from_log
-    from robot.replay import LogSource, Outputs, Placement, update_from_log
+    from onboard.logmap import map_from_log
+    from onboard.replay import LogSource, Outputs, Placement, update_from_log
 
     with tempfile.TemporaryDirectory() as tmp:
         map_from_log(DATA / "sena.keyframes.log", Path(tmp) / "k.yaml", progress=False)

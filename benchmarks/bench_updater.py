@@ -340,8 +340,8 @@ def log_calls(path: Path, parts: int, tmp: Path):
     (reference map, the updater configuration, [(scan, sensor pose, odometry)])."""
     from gridmap import save_map
     from gridmap.mapping import build_map
-    from robot.logmap import _placed_scans, map_frame
-    from robot.replay import LogSource, Outputs, update_from_log
+    from onboard.logmap import _placed_scans, map_frame
+    from onboard.replay import LogSource, Outputs, update_from_log
     from robotlogs import log_observations
 
     found = log_observations(path)

@@ -139,7 +139,7 @@ class LocalizerConfig:
     @classmethod
     def from_yaml(cls, path) -> LocalizerConfig:
         """Load from a YAML file holding the keys at the top level (or under ``localization:``,
-        or ``localizer:`` as in the robot configuration file of ``robot.robot_config``)."""
+        or ``localizer:`` as in the robot configuration file of ``onboard.robot_config``)."""
         return config_from_yaml(cls, path, LocalizationError, "localization", "localizer")
 
 

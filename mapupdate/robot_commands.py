@@ -20,11 +20,11 @@ from gridmap.metrics import compare_maps
 from mapstore import StoreError, open_store, report, spool
 from mapstore.backends import is_url, redacted
 from mapstore.png import write_diff_png
-from robot import logmap, replay
-from robot.outputs import check_outputs, map_files, map_inputs
-from robot.replay import LogSource, Outputs, Placement
-from robot.robot_config import load_robot_config
-from robot.ros1.node import run_node
+from onboard import logmap, replay
+from onboard.outputs import check_outputs, map_files, map_inputs
+from onboard.replay import LogSource, Outputs, Placement
+from onboard.robot_config import load_robot_config
+from onboard.ros1.node import run_node
 from robotlogs import LogLimits, log_observations
 
 from . import summaries
@@ -489,6 +489,6 @@ def ros1(args) -> int:
 
 
 def ros2(args) -> int:
-    from robot.ros2.node import run_node as run_ros2_node    # rclpy: the [ros2] extra
+    from onboard.ros2.node import run_node as run_ros2_node    # rclpy: the [ros2] extra
 
     return run_ros2_node(args.map, args.config or None, args.autostart, args.ros_argv)

@@ -1,10 +1,10 @@
 """The summaries of ``mapupdate update`` and ``mapupdate map`` as lines for people: the library
-returns what happened as a dict (``robot.replay.update_from_log``, ``robot.logmap.map_from_log``),
+returns what happened as a dict (``onboard.replay.update_from_log``, ``onboard.logmap.map_from_log``),
 and the command line says it."""
 
 from __future__ import annotations
 
-from robot.replay import CHANGE_KEYS
+from onboard.replay import CHANGE_KEYS
 
 
 def update_lines(s: dict) -> list[str]:

@@ -9,9 +9,9 @@ from pathlib import Path
 import sim
 from gridmap.config import DEFAULT_PROFILE
 from mapstore import open_store
-from robot.methods import check_method
-from robot.outputs import OutputClash, check_outputs
-from robot.robot_config import load_robot_config
+from onboard.methods import check_method
+from onboard.outputs import OutputClash, check_outputs
+from onboard.robot_config import load_robot_config
 from scenarios.catalog import HERE, find_scenario
 from scenarios.checkpoint import ResumeError
 from scenarios.generator import write_generated

@@ -78,9 +78,9 @@ def rare_paths() -> None:
 
     from localization.estimate import estimate
     from localization.resample import KldParameters
-    from robot.methods import make_method
-    from robot.pipeline import RobotPipeline, warm_up
-    from robot.robot_config import CLASSES
+    from onboard.methods import make_method
+    from onboard.pipeline import RobotPipeline, warm_up
+    from onboard.robot_config import CLASSES
 
     poses = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 1.0]])
     estimate(poses, np.full(2, 0.5), KldParameters(1, 2, 0.05, 0.99, np.array([0.5, 0.5, 0.2])))

@@ -8,7 +8,7 @@ observations (a scan with every pose the log gives at its time). Imports only ``
 Readers yield the plain records of :mod:`.records`; :class:`BagWriter` writes them, so simulated
 sessions can be stored as bags. Every error a user's file can cause is a :class:`LogError`.
 Heavy imports (rosbags) wait until they are needed. The map update that replays a log is
-``robot.replay.update_from_log``.
+``onboard.replay.update_from_log``.
 """
 
 from .carmen import CarmenLog, parse_carmen, read_carmen

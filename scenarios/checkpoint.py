@@ -34,7 +34,7 @@ import numpy as np
 from gridmap import MapUpdatingError, load_map
 from gridmap.atomic import write_atomically, write_with
 from gridmap.files import read_text
-from robot.robot_config import section_config
+from onboard.robot_config import section_config
 
 from .catalog import find_scenario
 from .options import RunOptions

@@ -40,9 +40,9 @@ from gridmap.config import DEFAULT_PROFILE, check_profile
 from gridmap.map_io import save_map
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck, PoseCheckConfig
-from robot.pipeline import RobotPipeline
-from robot.ros_common.store_link import rebased
-from robot.robot_config import POSE_CHECK_ON
+from onboard.pipeline import RobotPipeline
+from onboard.ros_common.store_link import rebased
+from onboard.robot_config import POSE_CHECK_ON
 from sim.fleet import FleetMember, FleetWorld
 from updater import MapUpdater, UpdaterConfig
 
@@ -320,7 +320,7 @@ class FleetSession:
         with open_store(self.options.store) as store:
             number = store.commit(updated, robot.version, {
                 "robot": f"robot{k + 1}", "method": f"fleet, {self.options.profile} profile",
-                "session": self.name, "scans": robot.pipeline.counts.as_dict()})
+                "session": self.name, "scans": onboard.pipeline.counts.as_dict()})
             merged = store.merged
             robot.version = number if merged is None else merged
             mine = store.get(robot.version)

@@ -26,7 +26,7 @@ class RunOptions:
     sessions: int | None = None
     quick: bool = False
     progress: bool = True
-    # The defaults of every configuration left None: "robot" or "paper" (robot.robot_config);
+    # The defaults of every configuration left None: "robot" or "paper" (onboard.robot_config);
     # None: robot, or, resuming, the run's own.
     profile: str | None = None
     updater_config: object | None = None      # an updater.UpdaterConfig; None: the profile's
@@ -43,7 +43,7 @@ class RunOptions:
     # the report's comparison columns (only when the run's profile is not the paper's)
     compare_paper: bool = True
     resume: bool = False       # continue the run in ``out`` after its last finished session
-    method: str = "paper"      # what updates the map: one of robot.methods.METHODS
+    method: str = "paper"      # what updates the map: one of onboard.methods.METHODS
 
 
 class SessionObserver(Protocol):

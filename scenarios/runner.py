@@ -23,7 +23,7 @@ from gridmap.config import DEFAULT_PROFILE, check_profile
 from gridmap.mapping import LogOddsMapper
 from localization import LocalizerConfig
 from localization.confidence import PoseCheckConfig
-from robot.robot_config import POSE_CHECK_ON, differences
+from onboard.robot_config import POSE_CHECK_ON, differences
 from updater import UpdaterConfig
 
 from . import checkpoint

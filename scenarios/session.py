@@ -21,8 +21,8 @@ from gridmap import FREE, OCCUPIED, OccupancyGrid, Pose2D
 from gridmap.metrics import compare_maps
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck, PoseCheckConfig
-from robot.methods import make_method
-from robot.pipeline import RobotPipeline
+from onboard.methods import make_method
+from onboard.pipeline import RobotPipeline
 
 # The robot starts each session at its dock, whose pose is known to about this precision.
 START_STD = (0.05, 0.05, 0.02)  # x [m], y [m], yaw [rad]
@@ -109,7 +109,7 @@ class UpdateSession:
     ``localizer_seed``: both localisers use it, as the evaluation asks. ``localizer_config``:
     by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas). ``pose_check``: the
     safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
-    ``method``: what updates the map, a name of ``robot.methods.METHODS`` (default the
+    ``method``: what updates the map, a name of ``onboard.methods.METHODS`` (default the
     paper's updater); ``self.updater`` is that method.
     """
 

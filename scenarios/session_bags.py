@@ -18,7 +18,7 @@ import shutil
 from pathlib import Path
 
 from gridmap import Pose2D
-from robot.outputs import OutputClash
+from onboard.outputs import OutputClash
 from robotlogs.records import MapRecord, OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import BagWriter
 

@@ -7,7 +7,7 @@ The spec (YAML)::
 
     scenarios: [aws_small_warehouse, {generate: {seeds: [1, 2, 3], size: [30, 20], sessions: 3}}]
     seeds: [7, 8]                        # run seeds (default: each scenario's own)
-    methods: [paper, hybrid, fuse, remap, none]  # robot.methods.METHODS (default: paper)
+    methods: [paper, hybrid, fuse, remap, none]  # onboard.methods.METHODS (default: paper)
     quick: true                          # the quick routes of `mapupdate run --quick`
     sessions: 3                          # the first K sessions only (default: all)
     profile: robot                       # robot (default) or paper, or a list of both to compare
@@ -56,8 +56,8 @@ from gridmap.config import check_profile
 from gridmap.files import (MAX_TEXT_BYTES, FileInputError, check_regular_file, load_yaml,
                            parse_yaml, read_text)
 from gridmap.suggest import did_you_mean
-from robot.methods import check_method
-from robot.robot_config import CLASSES, SECTIONS, load_robot_config, section_config
+from onboard.methods import check_method
+from onboard.robot_config import CLASSES, SECTIONS, load_robot_config, section_config
 from scenarios.catalog import find_scenario
 from scenarios.checkpoint import ResumeError, RunFolderLock, _sha256
 from scenarios.generator import check_arguments, write_generated

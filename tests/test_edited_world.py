@@ -553,7 +553,7 @@ def test_scoring_a_map_of_another_grid_is_refused(case, tmp_path, capsys):
 @pytest.mark.skipif(not (RADISH / "aces.log.gz").exists(),
                     reason=f"the aces log is not at {RADISH} (the public Radish data)")
 def test_aces_takes_four_removed_and_four_added_boxes_and_updates(tmp_path, capsys):
-    from robot.logmap import map_from_log
+    from onboard.logmap import map_from_log
 
     log = RADISH / "aces.log.gz"
     map_from_log(log, tmp_path / "aces.yaml", progress=False)

@@ -162,7 +162,7 @@ def test_each_robot_has_its_own_gate_in_front_of_the_shared_updater():
     gates = [SharedGate(shared), SharedGate(shared)]
     with pytest.raises(ValueError, match="gate_confirm needs a shared updater made with it"):
         SharedGate(shared, UpdaterConfig(gate_confirm=True))
-    from robot.pipeline import warm_up
+    from onboard.pipeline import warm_up
 
     scans = []
     warm_up(lambda g: _Recorder(scans))          # six scans of a walled room, moving 0.1 m each
@@ -182,7 +182,7 @@ def test_each_robot_has_its_own_gate_in_front_of_the_shared_updater():
 def test_a_robot_held_back_confirms_the_map_in_the_shared_updater():
     """With gate_confirm (the robot profile's), a robot standing still gives its first held-back
     scan's unchanged flags to the shared updater, once until a new view, and no change."""
-    from robot.pipeline import warm_up
+    from onboard.pipeline import warm_up
 
     ref = grid(np.pad(np.zeros((76, 76), np.int8), 2, constant_values=100).tolist())
     config = UpdaterConfig.profile("robot")

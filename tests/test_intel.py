@@ -15,7 +15,7 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, load_map, save_map
 from gridmap.mapping import build_map
 from gridmap.metrics import cross_correlation, opdf
 from robotlogs.carmen import read_carmen
-from robot.replay import LogSource, Outputs, update_from_log
+from onboard.replay import LogSource, Outputs, update_from_log
 
 INTEL = Path(__file__).resolve().parents[2] / "shared/data/intel.gfs.log"
 RES = 0.05

@@ -10,14 +10,14 @@ import pytest
 
 FORBIDDEN = ("sim", "scenarios", "studies", "pymunk", "rerun", "gymnasium", "matplotlib")
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "robot",
+PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlogs", "onboard",
             "scenarios", "studies", "mapupdate", "mapstore")
 
 
 @pytest.mark.parametrize("package", ["gridmap", "updater", "localization", "evaluation",
-                                     "robotlogs", "robot", "robot.replay", "robot.logmap",
+                                     "robotlogs", "onboard", "onboard.replay", "onboard.logmap",
                                      "mapstore",
-                                     "robot.methods", "robot.ros1.node", "robot.ros_common.settings"])
+                                     "onboard.methods", "onboard.ros1.node", "onboard.ros_common.settings"])
 def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
     code = (
         "import sys, importlib\n"
@@ -32,14 +32,14 @@ def test_core_packages_do_not_import_the_simulator_or_front_ends(package):
 @pytest.mark.parametrize("package, allowed", [
     ("gridmap", set()), ("updater", {"gridmap"}), ("localization", {"gridmap"}),
     ("evaluation", {"gridmap"}), ("robotlogs", {"gridmap"}), ("sim", {"gridmap"}),
-    ("robot", {"gridmap", "updater", "localization", "robotlogs", "mapstore"}),
+    ("onboard", {"gridmap", "updater", "localization", "robotlogs", "mapstore"}),
     ("mapstore", {"gridmap"}),
     # (scenarios/__main__.py: ``python -m scenarios`` is the command line)
     # (and the map store, for the fleet's store mode: robots committing as live nodes do)
     ("scenarios", {"gridmap", "sim", "updater", "localization", "evaluation", "robotlogs",
-                   "robot", "mapupdate", "mapstore"}),
-    ("studies", {"gridmap", "sim", "robot", "scenarios"}),
-    ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "robot", "scenarios",
+                   "onboard", "mapupdate", "mapstore"}),
+    ("studies", {"gridmap", "sim", "onboard", "scenarios"}),
+    ("mapupdate", {"gridmap", "localization", "robotlogs", "evaluation", "onboard", "scenarios",
                    "studies", "sim", "mapstore"})])
 def test_each_core_package_imports_only_what_design_md_allows(package, allowed):
     # every import statement, those inside functions too (imported on use)
@@ -126,8 +126,8 @@ def test_command_line_starts_without_compiling_kernels():
 
 @pytest.mark.parametrize("front_end, modules", [
     ("gymnasium", ["scenarios/gym/__init__.py", "scenarios/gym/env.py"]),
-    ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["robot/ros1/node.py"]),
-    ("rclpy", ["robot/ros2/bond.py", "robot/ros2/lifecycle.py", "robot/ros2/node.py"]),
+    ("rerun", ["scenarios/rerun_log.py"]), ("rospy", ["onboard/ros1/node.py"]),
+    ("rclpy", ["onboard/ros2/bond.py", "onboard/ros2/lifecycle.py", "onboard/ros2/node.py"]),
     ("ray", ["studies/sweep_ray.py"]), ("scipy", ["studies/study_report.py"]),
     ("psycopg", ["mapstore/backends.py"])])
 def test_each_optional_package_is_imported_in_one_place_only(front_end, modules):

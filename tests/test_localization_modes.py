@@ -15,7 +15,7 @@ from gridmap import Pose2D, Scan, save_map
 from gridmap.raycast import cast_rays
 from localization.modes import AmbiguousStart, ambiguous_modes, far_apart, pose_modes
 from mapupdate import main
-from robot.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
 from robotlogs.rosbag import write_bag
 
 import test_logs_replay as room

@@ -26,7 +26,7 @@ import pytest
 from gridmap import FREE, OCCUPIED, load_map, save_map
 from robotlogs.rosbag import write_bag
 from localization.confidence import PoseCheckConfig
-from robot.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
 
 import synthetic_hall as hall
 

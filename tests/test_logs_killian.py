@@ -30,8 +30,8 @@ from gridmap import FREE, OCCUPIED, UNKNOWN, save_map
 from gridmap import load_map
 from gridmap.mapping import build_map
 from robotlogs import log_observations
-from robot.logmap import _placed_scans, map_frame
-from robot.replay import LogSource, Outputs, update_from_log
+from onboard.logmap import _placed_scans, map_frame
+from onboard.replay import LogSource, Outputs, update_from_log
 
 from test_intel import figures
 

@@ -17,8 +17,8 @@ from robotlogs import LogError, log_observations, read_bag
 from robotlogs.records import OdomRecord, TransformRecord
 from robotlogs.rosbag import write_bag
 from mapupdate import main
-from robot.pipeline import RobotPipeline
-from robot.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.pipeline import RobotPipeline
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
 from updater import MapUpdater
 
 import test_logs_replay as room

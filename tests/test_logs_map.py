@@ -11,7 +11,7 @@ from gridmap.mapping import LogOddsMapper
 from robotlogs import LogError
 from robotlogs.rosbag import write_bag
 from mapupdate import main
-from robot.logmap import map_from_log
+from onboard.logmap import map_from_log
 
 import test_logs_replay as room
 

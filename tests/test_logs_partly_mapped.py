@@ -23,7 +23,7 @@ from gridmap import UNKNOWN, load_map, save_map
 from gridmap.mapping import build_map
 from robotlogs.carmen import read_carmen
 from robotlogs.rosbag import write_bag
-from robot.replay import LogSource, Outputs, update_from_log
+from onboard.replay import LogSource, Outputs, update_from_log
 from updater import UpdaterConfig
 
 import synthetic_hall as hall

@@ -12,7 +12,7 @@ from gridmap.raycast import cast_rays
 from robotlogs import detect_format
 from robotlogs.records import LogError, OdomRecord, PoseRecord, ScanRecord, TransformRecord
 from robotlogs.rosbag import write_bag
-from robot.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
 from updater import MapUpdater, UpdaterConfig
 
 RES = 0.05

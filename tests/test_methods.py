@@ -1,4 +1,4 @@
-"""The methods behind the updater's interface (robot.methods), each driven through the one
+"""The methods behind the updater's interface (onboard.methods), each driven through the one
 robot pipeline in a synthetic room: a box the map has is gone from the world, a box the world
 has is missing from the map, and a mapped annex lies outside what the robot can see."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gridmap import FREE, OCCUPIED, UNKNOWN, MapUpdatingError, OccupancyGrid
-from robot.methods import METHODS, MethodError, check_method, make_method
-from robot.pipeline import RobotPipeline
+from onboard.methods import METHODS, MethodError, check_method, make_method
+from onboard.pipeline import RobotPipeline
 from updater import UpdaterConfig, MapMethod, MapUpdater
 
 import synthetic_room as world
@@ -108,7 +108,7 @@ def test_run_refuses_an_unknown_method_before_writing_anything(tmp_path, capsys)
 def test_the_gym_environment_plays_a_session_with_the_method_asked_for(tmp_path):
     gymnasium = pytest.importorskip("gymnasium")
     from scenarios.generator import write_generated
-    from robot.methods import KeepMap
+    from onboard.methods import KeepMap
 
     path = str(write_generated(4, tmp_path / "g.yaml", size=(15, 10), sessions=2))
     with pytest.raises(MethodError, match="did you mean 'fuse'"):
@@ -162,7 +162,7 @@ def _drive(method, reference_map, shapes, seed=1, seconds=40.0):
 def test_hybrid_differs_from_the_paper_only_near_what_the_paper_detected(maps):
     """Where the hybrid's map differs from the paper's, a detected change's hit or a cell the
     paper changed lies within HYBRID_RADIUS; and it changes no cell M has unknown."""
-    from robot.methods import HYBRID_RADIUS
+    from onboard.methods import HYBRID_RADIUS
 
     ref = reference().data
     shapes = world.room_walls() + [ADDED]
@@ -226,7 +226,7 @@ def test_hybrid_maps_asked_for_at_every_scan_end_as_one_asked_for_at_the_end(map
 
 @pytest.mark.parametrize("radius", [0.0, -0.1, float("nan"), 6.0, True])
 def test_hybrid_refuses_a_radius_out_of_range(radius):
-    from robot.methods import HybridMethod
+    from onboard.methods import HybridMethod
 
     with pytest.raises(MethodError, match=r"hybrid: radius must be a number in \(0, 5\] m"):
         HybridMethod(reference(), None, radius=radius)

@@ -12,7 +12,7 @@ import numpy as np
 from gridmap import FREE, OCCUPIED, Pose2D, PoseVerdict
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck
-from robot.pipeline import RobotPipeline
+from onboard.pipeline import RobotPipeline
 from updater import MapUpdater, ScanStatus
 
 import synthetic_room as world

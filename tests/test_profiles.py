@@ -16,7 +16,7 @@ from gridmap.config import PROFILES
 from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheckConfig
 from mapupdate import main
-from robot.robot_config import (CLASSES, POSE_CHECK_ON, load_robot_config,
+from onboard.robot_config import (CLASSES, POSE_CHECK_ON, load_robot_config,
                                 profile_table_markdown)
 from updater import MapUpdater, UpdaterConfig
 from updater import config as updater_config

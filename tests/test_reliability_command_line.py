@@ -73,14 +73,14 @@ def ran(args, capsys) -> list[str]:
 ])
 def test_a_start_pose_off_the_free_floor_is_refused_before_the_log_is_read(
         room, tmp_path, capsys, monkeypatch, pose, cell, message):
-    import robot.replay
+    import onboard.replay
 
     d = copy_room(room, tmp_path / "f")
     if cell is not None:
         row, col, value = cell
         assert load_map(d / "map.yaml").data[row, col] == value
     read = []
-    monkeypatch.setattr(robot.replay, "log_observations", lambda *a, **k: read.append(a))
+    monkeypatch.setattr(onboard.replay, "log_observations", lambda *a, **k: read.append(a))
     err = refused(["update", "--map", d / "map.yaml", "--log", d / "run.log", "--out",
                    d / "o.yaml", "--initial-pose", *pose, "--no-progress"], inputs=d,
                   capsys=capsys, outputs=[d / "o.yaml", d / "o.pgm"])

@@ -26,9 +26,9 @@ from gridmap.atomic import write_atomically
 from localization.smoothing import MAX_POSES, PoseSmoother
 from mapupdate import main
 from mapupdate.summaries import update_lines
-from robot.pipeline import RobotPipeline
-from robot.replay import LogSource, Outputs, Placement, update_from_log
-from robot.ros_common.scans import usable_scan
+from onboard.pipeline import RobotPipeline
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.ros_common.scans import usable_scan
 from robotlogs.carmen import read_carmen
 from robotlogs.records import LogError
 from robotlogs.text_lines import GZIP_MIN_BYTES, MAX_LINE_BYTES, LogLimits, bounds

@@ -24,7 +24,7 @@ from robotlogs.carmen import parse_carmen
 from robotlogs.records import LogError, OdomRecord, ReadStats, ScanRecord, TransformRecord
 from mapupdate import main
 from mapupdate.summaries import update_lines as summary_lines
-from robot.replay import LogSource, Outputs, update_from_log
+from onboard.replay import LogSource, Outputs, update_from_log
 from robotlogs.rosbag import BagWriter, read_bag, write_bag
 from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 from updater.gating import GATED_INTERVAL, GATED_TIME_BACK

@@ -12,7 +12,7 @@ import scenarios.runner
 from localization import LocalizerConfig
 from localization.confidence import PoseCheckConfig
 from mapupdate import main
-from robot.robot_config import ConfigError, RobotConfig, load_robot_config
+from onboard.robot_config import ConfigError, RobotConfig, load_robot_config
 from tiny_room import tiny_room, write_tiny_room
 from updater import UpdaterConfig
 
@@ -156,7 +156,7 @@ def test_update_refuses_a_misspelt_file_before_reading_the_log(tmp_path, capsys,
 
 
 def test_update_hands_the_sections_to_the_replay(tmp_path, monkeypatch):
-    import robot.replay
+    import onboard.replay
 
     seen = {}
 
@@ -166,7 +166,7 @@ def test_update_hands_the_sections_to_the_replay(tmp_path, monkeypatch):
                 "scans_refused_by_pose_check": 0, "cells_freed": 0, "cells_occupied": 0,
                 "pose_source": "recorded"}
 
-    monkeypatch.setattr(robot.replay, "update_from_log", fake_update)
+    monkeypatch.setattr(onboard.replay, "update_from_log", fake_update)
     cfg = write_yaml(tmp_path / "cfg.yaml", VALID)
     assert main(["update", "--map", "m.yaml", "--log", "l.log", "--out", "o.yaml", "--config",
                  str(cfg), "--pose-check", "--no-progress"]) == 0

@@ -353,8 +353,8 @@ def test_a_scan_worker_that_stops_anyway_is_an_error_on_diagnostics(ros):
 
     import rospy
 
-    from robot.ros1.node import MapUpdaterNode
-    from robot.ros_common.settings import node_settings
+    from onboard.ros1.node import MapUpdaterNode
+    from onboard.ros_common.settings import node_settings
 
     node = MapUpdaterNode(*node_settings({}))
 

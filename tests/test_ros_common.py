@@ -8,8 +8,8 @@ import pytest
 from gridmap import FREE, OCCUPIED, UNKNOWN, GridError, MapUpdatingError, OccupancyGrid
 from localization.confidence import PoseCheckConfig
 from updater import UpdaterConfig
-from robot.ros_common.grids import changed_box, grid_from_message, message_fields
-from robot.ros_common.settings import (NodeSettings, NodeSettingsError, Ros2Settings,
+from onboard.ros_common.grids import changed_box, grid_from_message, message_fields
+from onboard.ros_common.settings import (NodeSettings, NodeSettingsError, Ros2Settings,
                                        node_settings, refuse_saving_over_the_map)
 
 
@@ -102,7 +102,7 @@ def test_the_node_lays_the_file_and_its_parameters_over_the_profile_key_by_key()
     """The robot profile (with the growth into the unknown), a ``--config`` file's keys over
     it, the node's parameters over those: a key left out keeps the profile's value, as for
     ``mapupdate update``; ``profile:=paper`` starts from the paper's."""
-    from robot.robot_config import POSE_CHECK_ON
+    from onboard.robot_config import POSE_CHECK_ON
 
     settings, updater, check = node_settings({})
     assert updater == UpdaterConfig.profile("robot") and updater.grow_into_unknown is True
@@ -131,9 +131,9 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     first processed, the rest refused by the robot's gate (no motion; the first of them confirms
     the map's surfaces it hits)."""
     from gridmap import Pose2D
-    from robot.methods import make_method
-    from robot.pipeline import RobotPipeline
-    from robot.ros_common.health import Health, pipeline_values
+    from onboard.methods import make_method
+    from onboard.pipeline import RobotPipeline
+    from onboard.ros_common.health import Health, pipeline_values
     from updater import UpdaterConfig
 
     import synthetic_room as world
@@ -218,7 +218,7 @@ def _edge(t, parent, child, x, y=0.0, th=0.0, static=False):
 
 
 def test_tf_poses_interpolate_compose_and_wait_for_the_localisers_correction():
-    from robot.ros_common.poses import TfPoses
+    from onboard.ros_common.poses import TfPoses
 
     p = TfPoses("map", "odom", "base_link")
     p.add(_edge(0.0, "base_link", "laser", 0.25, static=True))
@@ -238,7 +238,7 @@ def test_tf_poses_interpolate_compose_and_wait_for_the_localisers_correction():
 
 
 def test_tf_poses_take_a_corrected_static_mount_and_stay_bounded():
-    from robot.ros_common.poses import TfPoses
+    from onboard.ros_common.poses import TfPoses
 
     p = TfPoses("map", "odom", "base_link", keep=5.0)
     p.add(_edge(0.0, "base_link", "laser", 0.25, static=True))
@@ -253,7 +253,7 @@ def test_tf_poses_take_a_corrected_static_mount_and_stay_bounded():
 
 
 def test_tf_poses_stay_bounded_when_the_odometry_never_comes():
-    from robot.ros_common.poses import TfPoses
+    from onboard.ros_common.poses import TfPoses
 
     p = TfPoses("map", "odom", "base_misnamed", keep=5.0)
     for k in range(9000):                        # 30 s at 300 Hz, no odom -> base_misnamed
@@ -267,7 +267,7 @@ def test_tf_poses_stay_bounded_when_the_odometry_never_comes():
 def test_the_scan_queue_drops_the_oldest_past_its_count_or_its_memory():
     import array
 
-    from robot.ros_common.queue import ScanQueue, scan_bytes
+    from onboard.ros_common.queue import ScanQueue, scan_bytes
 
     q = ScanQueue(max_items=3, max_bytes=10**9)
     assert [q.push(k, 10) for k in range(5)] == [0, 0, 0, 1, 1]
@@ -299,7 +299,7 @@ def _rotation(q):
 
 
 def test_quaternions_are_normalised_or_refused_as_tf2_does():
-    from robot.ros_common.transforms import TransformError, planar, unit_quaternion
+    from onboard.ros_common.transforms import TransformError, planar, unit_quaternion
 
     q = _quaternion(yaw=np.pi / 2)
     for scale in (2.0, 0.5):                     # the yaw 126.9 and 18.4 deg read before
@@ -320,7 +320,7 @@ def test_quaternions_are_normalised_or_refused_as_tf2_does():
     (np.pi - 0.1, 0.0, 0.5, True, 0.1)])
 def test_a_rotation_reduced_to_the_plane_says_upside_down_and_tilt(roll, pitch, yaw, flipped,
                                                                    tilt):
-    from robot.ros_common.transforms import planar
+    from onboard.ros_common.transforms import planar
 
     q = _quaternion(roll, pitch, yaw)
     pose, upside_down, got_tilt = planar(1.0, 2.0, q)
@@ -333,8 +333,8 @@ def test_a_rotation_reduced_to_the_plane_says_upside_down_and_tilt(roll, pitch, 
 
 def test_an_upside_down_mount_places_each_beam_where_the_3d_transform_does():
     from gridmap import Pose2D, Scan
-    from robot.ros_common.poses import TfPoses
-    from robot.ros_common.transforms import ascending, mirrored, planar
+    from onboard.ros_common.poses import TfPoses
+    from onboard.ros_common.transforms import ascending, mirrored, planar
 
     # base -> plate (rolled by pi, 0.3 m up, turned 0.4) -> laser (0.1 forward, 0.05 left
     # of the plate, turned 0.2): the beams in 3D, against the node's planar reading
@@ -359,8 +359,8 @@ def test_an_upside_down_mount_places_each_beam_where_the_3d_transform_does():
 
 
 def test_a_tilted_mount_is_refused():
-    from robot.ros_common.poses import TfPoses
-    from robot.ros_common.transforms import TransformError, planar
+    from onboard.ros_common.poses import TfPoses
+    from onboard.ros_common.transforms import TransformError, planar
 
     t = TfPoses("map", "odom", "base_link")
     pose, flipped, tilt = planar(0.2, 0.0, _quaternion(0.0, 0.3, 0.0))   # pitched 17 deg
@@ -372,7 +372,7 @@ def test_a_tilted_mount_is_refused():
 
 def test_a_clockwise_scan_is_the_same_beams_reversed():
     from gridmap import Scan
-    from robot.ros_common.transforms import ascending
+    from onboard.ros_common.transforms import ascending
 
     cw = Scan(np.array([1.0, 2.0, 3.0, 4.0], np.float32), 1.0, -0.25, 0.1, 10.0)
     ccw = ascending(cw)
@@ -382,7 +382,7 @@ def test_a_clockwise_scan_is_the_same_beams_reversed():
 
 
 def test_sequence_gaps_count_the_messages_lost_on_the_way():
-    from robot.ros_common.gaps import Gaps
+    from onboard.ros_common.gaps import Gaps
 
     g = Gaps()
     seen = [g.see("a", n) for n in (1, 2, 5, 6, 10)] + [g.see("b", n) for n in (7, 9)]
@@ -392,7 +392,7 @@ def test_sequence_gaps_count_the_messages_lost_on_the_way():
 
 
 def test_oversize_scans_and_scans_of_more_than_a_turn_are_skipped():
-    from robot.ros_common.scans import usable_scan
+    from onboard.ros_common.scans import usable_scan
 
     def scan(n, increment):
         return NS(header=NS(stamp=NS(sec=5, nanosec=0), frame_id="laser"), ranges=[1.0] * n,
@@ -408,7 +408,7 @@ def test_oversize_scans_and_scans_of_more_than_a_turn_are_skipped():
 
 
 def test_the_save_path_is_checked_at_start(tmp_path):
-    from robot.ros_common.settings import check_save_path
+    from onboard.ros_common.settings import check_save_path
 
     check_save_path(str(tmp_path / "map.yaml"))
     for path, words in (("/", "folder"), (str(tmp_path), "folder"),

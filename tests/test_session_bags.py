@@ -6,7 +6,7 @@ import pytest
 
 from gridmap import load_map
 from mapupdate import main
-from robot.replay import LogSource, Outputs, Placement, update_from_log
+from onboard.replay import LogSource, Outputs, Placement, update_from_log
 from robotlogs.rosbag import bag_topics
 from scenarios.session_bags import SessionBagRecorder
 from scenarios.observers import Observers

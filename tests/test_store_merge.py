@@ -338,7 +338,7 @@ def test_a_node_taking_up_a_newer_version_keeps_its_uncommitted_changes(target):
     """A node has freed box 1 and not committed; another robot's version (box 2 freed)
     appears. The node goes on from that version with its own change laid on it, and its
     commit, made on the newer version, keeps both."""
-    from robot.ros_common.store_link import StoreLink
+    from onboard.ros_common.store_link import StoreLink
 
     base = room()
     with open_store(target, create=True) as s:

@@ -15,9 +15,9 @@ import pytest
 from gridmap import FREE, OCCUPIED, UNKNOWN, Pose2D, load_map, save_map
 from robotlogs.carmen import read_carmen
 from mapupdate import main
-from robot.methods import make_method
+from onboard.methods import make_method
 from mapupdate.summaries import update_lines as summary_lines
-from robot.replay import LogSource, Outputs, ScanClock, update_from_log
+from onboard.replay import LogSource, Outputs, ScanClock, update_from_log
 from updater import ScanStatus, UpdaterConfig
 
 import synthetic_room as world

@@ -1,6 +1,6 @@
 """What updates a map, as the robot pipeline sees it. The paper's ``MapUpdater`` implements
 this interface, and so do the other methods a robot or a study may run in its place (the
-log-odds baselines and the hybrid of ``robot.methods``): the pipeline, the log replay, the
+log-odds baselines and the hybrid of ``onboard.methods``): the pipeline, the log replay, the
 ROS node and the simulated sessions know a method only through it."""
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ from gymnasium import spaces
 import sim
 from gridmap import OccupancyGrid, Pose2D, load_map
 from gridmap.map_io import trinary_image
-from robot.methods import check_method
-from robot.robot_config import ConfigError, load_robot_config
+from onboard.methods import check_method
+from onboard.robot_config import ConfigError, load_robot_config
 
 from ..catalog import find_scenario
 from ..options import RunOptions
@@ -111,7 +111,7 @@ class WarehouseMapUpdateEnv(gym.Env):
     * ``config``: the robot software's configuration as ``mapupdate run --config`` reads it,
       a dict ``{"updater": {...}, "localizer": {...}, "pose_check": {...}}`` (each section
       optional; keys the fields of ``UpdaterConfig``, ``LocalizerConfig``,
-      ``PoseCheckConfig``), a YAML path or a ``robot.robot_config.RobotConfig``. An unknown
+      ``PoseCheckConfig``), a YAML path or a ``onboard.robot_config.RobotConfig``. An unknown
       section or key is refused (``ConfigError``) with the nearest valid name.
     * ``profile``: the defaults the configuration starts from, ``"robot"`` (default, what a
       robot should run) or ``"paper"`` (the paper and its authors' code), as ``mapupdate run
@@ -127,7 +127,7 @@ class WarehouseMapUpdateEnv(gym.Env):
     an unknown ``render_mode``; a NaN or negative ``lost_distance`` (inf: never lost); a
     negative, NaN or infinite ``waypoint_tolerance`` or ``goal_tolerance``.
     * ``method``: what updates the map, as ``mapupdate run --method``: ``paper`` (the
-      updater, default), ``none``, ``remap``, ``fuse`` or ``hybrid`` (``robot.methods``);
+      updater, default), ``none``, ``remap``, ``fuse`` or ``hybrid`` (``onboard.methods``);
       an unknown name is refused (``MethodError``) with the nearest valid one.
 
     ## Version History

@@ -1,7 +1,7 @@
 """Map-updating methods behind one small interface, so that the paper's updater can be compared
 with what a robot would do without it.
 
-A method is what the robot pipeline (``robot.pipeline.RobotPipeline``) hands each placed
+A method is what the robot pipeline (``onboard.pipeline.RobotPipeline``) hands each placed
 scan to. It has
 
 - ``process(scan, sensor_pose, odometry=None, pose_check=None) -> updater.ScanReport``: one

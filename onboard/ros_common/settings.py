@@ -138,7 +138,7 @@ class Ros2Settings(NodeSettings):
 
 def node_settings(params: dict, base=None, kind: type = NodeSettings):
     """(settings, UpdaterConfig, PoseCheckConfig) from the node's parameters ``params`` laid
-    key by key over ``base`` (a ``robot.robot_config.RobotConfig`` from the ``--config`` file,
+    key by key over ``base`` (a ``onboard.robot_config.RobotConfig`` from the ``--config`` file,
     or None); ``kind``: ``NodeSettings`` (ROS 1) or ``Ros2Settings``. A ``localizer`` section is
     accepted, for a file shared with ``mapupdate update``, and not used: the node takes its
     poses from the robot's localisation."""

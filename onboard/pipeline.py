@@ -66,7 +66,7 @@ class RobotPipeline:
     on one reference map.
 
     ``updater``: an ``updater.MapUpdater``, or any ``updater.MapMethod`` (the baselines and
-    the hybrid of ``robot.methods``); None: localisation only, as the runner's second
+    the hybrid of ``onboard.methods``); None: localisation only, as the runner's second
     localiser on M1. ``localizer``: a ``localization.MonteCarloLocalizer`` already initialised
     (None: poses come with each scan; it may be set later, once a start is known).
     ``pose_check``: a ``localization.confidence.PoseCheck`` on the updater's reference map.

@@ -213,5 +213,5 @@ def _read_yaml(path: Path):
         raise ConfigError(str(e)) from None
 
 
-if __name__ == "__main__":      # python -m robot.robot_config: the table of the profiles
+if __name__ == "__main__":      # python -m onboard.robot_config: the table of the profiles
     print(profile_table_markdown(), end="")

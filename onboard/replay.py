@@ -25,7 +25,7 @@ Where the poses come from (``pose_source``):
   given, else ``"localizer"``.
 
 What updates the map (``method``): the paper's updater (the default), or ``fuse`` / ``hybrid``
-of :mod:`robot.methods`, behind the same gate and pose check. Only the paper's updater has
+of :mod:`onboard.methods`, behind the same gate and pose check. Only the paper's updater has
 a state to save and load.
 
 Scan times: the gate and the pose smoother need time to pass between scans. A log whose stamps
@@ -188,7 +188,7 @@ class Placement:
     recorded). ``pose_check``: scans whose pose the scan's own fit to the reference map (and,
     with the localiser, its covariance) calls unsure change nothing
     (``localization.confidence.PoseCheck``; None: as ``profile`` has it). The configurations:
-    None for the profile's (``robot.robot_config``)."""
+    None for the profile's (``onboard.robot_config``)."""
 
     source: str = "auto"
     initial_pose: Pose2D | None = None

@@ -10,7 +10,7 @@ costmap_2d's static layer reads with ``subscribe_to_updates``), and the node's h
 ``/diagnostics`` (``pipeline_values``: the method, the scans by fate, the gate's refusals by
 rule, the evidence of change left below the threshold). Services (std_srvs/Trigger):
 ``~save``, ``~commit``, ``~reset``. ``~method`` chooses what updates the map: the paper's
-updater (the default), ``fuse`` or ``hybrid`` (``robot.methods``).
+updater (the default), ``fuse`` or ``hybrid`` (``onboard.methods``).
 
 Scans are queued by the subscriber and processed in order by one worker thread, so a slow
 scan never blocks ROS's callbacks; past ``~queue_size`` waiting scans the oldest is dropped

@@ -320,7 +320,7 @@ class FleetSession:
         with open_store(self.options.store) as store:
             number = store.commit(updated, robot.version, {
                 "robot": f"robot{k + 1}", "method": f"fleet, {self.options.profile} profile",
-                "session": self.name, "scans": onboard.pipeline.counts.as_dict()})
+                "session": self.name, "scans": robot.pipeline.counts.as_dict()})
             merged = store.merged
             robot.version = number if merged is None else merged
             mine = store.get(robot.version)

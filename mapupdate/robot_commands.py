@@ -327,11 +327,12 @@ def log_limits(args) -> LogLimits:
 
 def map_command(args) -> int:
     check_outputs({"--log": [args.log]}, {"--out": map_files(args.out)})
-    summary = logmap.map_from_log(args.log, args.out, resolution=args.resolution,
-                                  pose_source=args.poses, log_format=args.format,
-                                  strict=args.strict, scan_topics=args.scan_topic or None,
-                                  odom_topic=args.odom_topic, pose_topic=args.pose_topic,
-                                  limits=log_limits(args), progress=not args.no_progress)
+    source = logmap.LogSource(Path(args.log), format=args.format, strict=args.strict,
+                              scan_topics=tuple(args.scan_topic) if args.scan_topic else None,
+                              odom_topic=args.odom_topic, pose_topic=args.pose_topic,
+                              limits=log_limits(args))
+    summary = logmap.map_from_log(source, args.out, resolution=args.resolution,
+                                  pose_source=args.poses, progress=not args.no_progress)
     print("\n".join(summaries.map_lines(summary)))
     return 0
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,22 +21,42 @@ from tqdm import tqdm
 from gridmap import OccupancyGrid, Pose2D, save_map
 from gridmap.map_io import MAX_CELLS  # the loader's limit: a map written can be read again
 from gridmap.mapping import LogOddsMapper
-from robotlogs import LogError, log_observations
+from robotlogs import LogError, LogLimits, log_observations
 
 MAP_SOURCES = ("recorded", "truth")
 MARGIN = 1.0                 # [m] of unknown around the box of hits
 
 
-def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: str = "recorded",
-                 start_time: float | None = None, end_time: float | None = None,
-                 log_format: str | None = None, strict: bool = False, scan_topics=None,
-                 odom_topic=None, pose_topic=None, truth_topic=None,
-                 laser_mount: Pose2D | None = None, params=None, limits=None,
-                 progress: bool = True) -> dict:
-    """Build a map from the scans of ``log_path`` (those within ``start_time`` / ``end_time``
-    [s, log time] when given) and save it as ``out_path``; returns a summary. ``params``: a
-    ``gridmap.mapping.LogOddsParams`` (default: the simulator's M1); ``limits``: what a
-    CARMEN log may hold (``robotlogs.LogLimits``)."""
+@dataclass(frozen=True)
+class LogSource:
+    """Where the log is and how to read it: ``path`` (a ROS 1 bag, a ROS 2 bag folder or a
+    CARMEN log), its ``format`` (None: detected), ``strict`` (a malformed line or message is
+    an error instead of a counted skip), the topics of a bag (None: found), ``laser_mount``
+    (None: the log's), ``start_time`` / ``end_time`` [s, log time] that limit the scans
+    used, and ``limits``: what a CARMEN log may hold, and whether one cut short is read
+    (``robotlogs.LogLimits``; None: its defaults)."""
+
+    path: Path
+    format: str | None = None
+    strict: bool = False
+    scan_topics: tuple[str, ...] | None = None
+    odom_topic: str | None = None
+    pose_topic: str | None = None
+    truth_topic: str | None = None
+    laser_mount: Pose2D | None = None
+    start_time: float | None = None
+    end_time: float | None = None
+    limits: LogLimits | None = None
+
+
+def map_from_log(log: LogSource | str | Path, out_path, *, resolution: float = 0.05,
+                 pose_source: str = "recorded", params=None, progress: bool = True) -> dict:
+    """Build a map from the scans of ``log`` (a path, or a ``LogSource``: the path and how to
+    read it, the scans within its ``start_time`` / ``end_time`` [s, log time]) and save it as
+    ``out_path``; returns a summary. ``params``: a ``gridmap.mapping.LogOddsParams`` (default:
+    the simulator's M1)."""
+    log = log if isinstance(log, LogSource) else LogSource(Path(log))
+    log_path = log.path
     wall0 = _time.perf_counter()
     if pose_source not in MAP_SOURCES:
         raise LogError(f"the map's poses must be one of {', '.join(MAP_SOURCES)}, got "
@@ -45,15 +66,15 @@ def map_from_log(log_path, out_path, *, resolution: float = 0.05, pose_source: s
         raise LogError(f"--resolution must be a number of metres in [0.005, 10], got "
                        f"{resolution!r}")
     _refuse_clash(log_path, out_path)
-    found = log_observations(log_path, log_format=log_format, strict=strict,
-                             scan_topics=scan_topics, odom_topic=odom_topic,
-                             pose_topic=pose_topic, truth_topic=truth_topic,
-                             laser_mount=laser_mount, limits=limits)
+    found = log_observations(log_path, log_format=log.format, strict=log.strict,
+                             scan_topics=log.scan_topics, odom_topic=log.odom_topic,
+                             pose_topic=log.pose_topic, truth_topic=log.truth_topic,
+                             laser_mount=log.laser_mount, limits=log.limits)
     if not found.has["recorded" if pose_source == "recorded" else "truth"]:
         raise LogError(f"{log_path}: no {'corrected' if pose_source == 'recorded' else 'true'} "
                        "poses to map with (a map needs a log whose poses are right; a raw log "
                        "can update a map with --poses localizer, not make one)")
-    placed = _placed_scans(found, pose_source, (start_time, end_time))
+    placed = _placed_scans(found, pose_source, (log.start_time, log.end_time))
     if not placed:
         raise LogError(f"{log_path}: no scan with a pose to map (of {found.total}); "
                        f"{found.stats.summary()}")

@@ -50,10 +50,11 @@ from localization import LocalizerConfig, MonteCarloLocalizer
 from localization.confidence import PoseCheck, PoseCheckConfig
 from localization.smoothing import MAX_WINDOW, SMOOTH_WINDOW, PoseSmoother
 from localization.tracking import TrackingMonitor
-from robotlogs import LogError, LogLimits, Observation, log_observations
+from robotlogs import LogError, Observation, log_observations
 from robotlogs.tum import write_tum
 from updater import MapUpdater, ScanStatus, UpdaterConfig
 
+from .logmap import LogSource
 from .methods import ROBOT_METHODS, check_method, make_method
 from .pipeline import RobotPipeline, Step
 from .robot_config import POSE_CHECK_ON
@@ -156,28 +157,6 @@ class Replay:
 
 
 # --- the replay --------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class LogSource:
-    """Where the log is and how to read it: ``path`` (a ROS 1 bag, a ROS 2 bag folder or a
-    CARMEN log), its ``format`` (None: detected), ``strict`` (a malformed line or message is
-    an error instead of a counted skip), the topics of a bag (None: found), ``laser_mount``
-    (None: the log's), ``start_time`` / ``end_time`` [s, log time] that limit the scans
-    used, and ``limits``: what a CARMEN log may hold, and whether one cut short is read
-    (``robotlogs.LogLimits``; None: its defaults)."""
-
-    path: Path
-    format: str | None = None
-    strict: bool = False
-    scan_topics: tuple[str, ...] | None = None
-    odom_topic: str | None = None
-    pose_topic: str | None = None
-    truth_topic: str | None = None
-    laser_mount: Pose2D | None = None
-    start_time: float | None = None
-    end_time: float | None = None
-    limits: LogLimits | None = None
-
 
 @dataclass(frozen=True)
 class Placement:

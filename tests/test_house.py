@@ -17,15 +17,12 @@ PACKAGES = ("gridmap", "sim", "updater", "localization", "evaluation", "robotlog
             "scenarios", "studies", "mapupdate", "mapstore")
 HELPERS = {p.stem for p in TESTS.glob("*.py")}
 TEST_ONLY = {"pytest", "hypothesis", "filterpy"}        # the ``dev`` extra's, not the product's
-# Files being rewritten in other changes (the ROS 2 fleet test): their path hacks go with
-# those rewrites. Remove a name here once its file is clean.
-KNOWN = {"test_ros2_fleet.py"}
 SYS_PATH_EDIT = re.compile(r"sys\.path\s*(\.\s*(insert|append|extend)\b|\[|\+=|=[^=])")
 
 
 def files_of_the_tests(pattern: str = "**/*.py") -> list[pathlib.Path]:
     return sorted(p for p in TESTS.glob(pattern)
-                  if p.relative_to(TESTS).as_posix() not in KNOWN and "__pycache__" not in p.parts)
+                  if "__pycache__" not in p.parts)
 
 
 def test_no_test_edits_sys_path():

@@ -160,10 +160,11 @@ def graph(tmp_path_factory):
 # the recording player (ros/tools/play.py) in a robot's namespace: rclpy.init() reads
 # sys.argv, so the remapping arguments go there (play.py's own command line takes none)
 PLAY_IN_NAMESPACE = """
-import sys
+import importlib.util, sys
 bag, namespace, rate, tools = sys.argv[1:5]
-sys.path.insert(0, tools)
-import play
+spec = importlib.util.spec_from_file_location("play", f"{tools}/play.py")
+play = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(play)
 sys.argv = [sys.argv[0], "--ros-args", "-r", f"__ns:=/{namespace}", "-r", "/tf:=tf",
             "-r", "/tf_static:=tf_static"]
 sys.exit(play.main(bag, float(rate), "tf"))

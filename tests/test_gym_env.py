@@ -2,9 +2,12 @@
 checker, replays a seed exactly, vectorises, and reproduces the runner's figures when the
 runner's own robot drives it."""
 
+import ast
+import dataclasses
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -284,3 +287,56 @@ def test_good_edge_arguments_are_accepted(room, m1):
                     render_scale=1, lost_distance=float("inf"), waypoint_tolerance=0.0,
                     goal_tolerance=0.0)
     assert env.control_period == pytest.approx(0.1) and env.lost_distance == float("inf")
+
+
+# --- the settings: keywords or an EnvOptions record, an unknown name refused in one line ------
+def test_a_misspelt_setting_is_refused_in_one_line_naming_the_nearest(room, m1):
+    from scenarios.gym.env import EnvOptions, EnvOptionsError
+
+    with pytest.raises(EnvOptionsError) as err:
+        construct(room, m1, quik=True)
+    assert str(err.value) == "WarehouseMapUpdateEnv: unknown setting 'quik' (did you mean 'quick'?)"
+    # through gymnasium.make too (a TypeError there would carry every keyword's value)
+    with pytest.raises(EnvOptionsError, match=r"^WarehouseMapUpdateEnv: unknown setting "
+                                              r"'profil' \(did you mean 'profile'\?\)$"):
+        make(room, m1, profil="paper")
+    with pytest.raises(EnvOptionsError, match=r"^WarehouseMapUpdateEnv: unknown setting "
+                                              r"'rendre_scale' \(did you mean 'render_scale'\?\)$"):
+        construct(room, m1, options={"rendre_scale": 3})
+    # nothing near: the line lists the settings
+    with pytest.raises(EnvOptionsError) as err:
+        construct(room, m1, zzzz=1)
+    message = str(err.value)
+    assert "\n" not in message and "'zzzz'" in message
+    assert all(f.name in message for f in dataclasses.fields(EnvOptions))
+    with pytest.raises(EnvOptionsError, match="options must be an EnvOptions"):
+        construct(room, m1, options=3)
+
+
+def test_settings_as_a_record_play_as_keywords_do(room, m1):
+    from scenarios.gym.env import EnvOptions
+
+    given = dict(control_period=0.1, lost_distance=0.4, map_observation=True)
+    by_keywords = construct(room, m1, **given)
+    record = EnvOptions(control_period=0.1, lost_distance=2.0, map_observation=True)
+    by_record = construct(room, m1, options=record, lost_distance=0.4)    # keywords win
+    assert by_record.options == by_keywords.options == EnvOptions(reference_map=m1, **given)
+    assert record.lost_distance == 2.0                    # the record given is left as it was
+    assert same(play(by_keywords, 11, 30), play(by_record, 11, 30))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        record.quick = True
+
+
+def test_no_function_of_the_env_package_takes_more_than_12_parameters():
+    package = Path(scenarios.gym.__file__).parent
+    found = []
+    for path in sorted(package.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = node.args
+                names = [p.arg for p in a.posonlyargs + a.args + a.kwonlyargs]
+                names += [p.arg for p in (a.vararg, a.kwarg) if p is not None]
+                n = len([x for x in names if x not in ("self", "cls")])
+                if n > 12:
+                    found.append(f"{path.name}:{node.lineno} {node.name} ({n})")
+    assert found == []

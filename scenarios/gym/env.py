@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import gymnasium as gym
@@ -13,8 +15,9 @@ import numpy as np
 from gymnasium import spaces
 
 import sim
-from gridmap import OccupancyGrid, Pose2D, load_map
+from gridmap import MapUpdatingError, OccupancyGrid, Pose2D, load_map
 from gridmap.map_io import trinary_image
+from gridmap.suggest import did_you_mean
 from onboard.methods import check_method
 from onboard.robot_config import ConfigError, load_robot_config
 
@@ -24,6 +27,70 @@ from ..runner import resolve_profile
 from ..session import UpdateSession, session_seeds
 from ..topview import scan_points, top_view
 from .episode import StepOutcome, default_reward, initial_map, waypoints_reached
+
+
+class EnvOptionsError(MapUpdatingError, ValueError):
+    """A setting the environment does not have; the message names it and the nearest one.
+    (Not a ``TypeError``: ``gymnasium.make`` would append every keyword's value to it.)"""
+
+
+@dataclass(frozen=True)
+class EnvOptions:
+    """The settings of ``WarehouseMapUpdateEnv`` beside its scenario and session. They are
+    given as keywords, ``gymnasium.make("WarehouseMapUpdate-v0", quick=True, profile="paper")``,
+    or as a record, ``options=EnvOptions(quick=True)``, which keywords given beside it override;
+    the environment keeps the result as ``env.options``. The environment refuses a bad value
+    with a ``ValueError`` naming it and its value, before any work."""
+
+    quick: bool = False                 # cut the update routes as ``mapupdate run --quick`` does
+    # M_{i-1}: an OccupancyGrid or a map_server YAML path; None: M1, built by the mapping session
+    # as the runner builds it (kept per scenario and seed)
+    reference_map: OccupancyGrid | str | Path | None = None
+    # M1 for the runner's second localiser, in the same forms; None: the reference map if one is
+    # given, else M1
+    initial_map: OccupancyGrid | str | Path | None = None
+    # seed of the mapping run that builds M1, an integer >= 0; None: the episode's seed
+    map_seed: int | None = None
+    # [s] how long an action is held: a whole number of physics steps, in (0, 60]
+    # (MAX_CONTROL_PERIOD; not NaN or inf); None: one step (0.05 s in the warehouse, the rate
+    # the runner's robot is driven at)
+    control_period: float | None = None
+    map_observation: bool = False       # add the map image, ``map``, to the observation
+    # ``reward_fn(StepOutcome) -> float`` (see the environment's Rewards); None:
+    # ``episode.default_reward``
+    reward_fn: Callable[[StepOutcome], float] | None = None
+    # [m] an estimate this far from the truth is lost (costs reward); >= 0, not NaN; inf: never
+    lost_distance: float = 0.5
+    # [m] a route waypoint is passed within this distance, the last within ``goal_tolerance``
+    # (see the environment's Episode End); each finite and >= 0
+    waypoint_tolerance: float = 0.3
+    goal_tolerance: float = 0.05        # [m]
+    # the updater's configuration as the runner takes it (an ``UpdaterConfig``); None: the
+    # profile's, with ``config``'s keys; not beside ``config["updater"]``
+    updater_config: object | None = None
+    # the localiser's configuration as the runner takes it (a ``LocalizerConfig`` or a mapping
+    # of its keys); None: the profile's, with ``config``'s keys; not beside ``config["localizer"]``
+    localizer_config: object | None = None
+    # whether the pose check runs; None: as the profile has it (on for robot, off for paper)
+    pose_check: bool | None = None
+    # the robot software's configuration as ``mapupdate run --config`` reads it: a dict
+    # ``{"updater": {...}, "localizer": {...}, "pose_check": {...}}`` (each section optional;
+    # keys the fields of UpdaterConfig, LocalizerConfig, PoseCheckConfig), a YAML path or an
+    # ``onboard.robot_config.RobotConfig``; an unknown section or key is refused
+    # (``ConfigError``) with the nearest valid name. None: no keys
+    config: object | None = None
+    # the defaults the configuration starts from, as ``mapupdate run --profile``: "robot" (what
+    # a robot should run) or "paper" (the paper and its authors' code); ``config``'s keys are
+    # laid over it key by key. None: robot
+    profile: str | None = None
+    render_mode: str | None = None      # "rgb_array": ``render()`` draws a top view; None: none
+    # [px per cell] of the top view: a whole number >= 1 that keeps the picture within 4096 px
+    # a side (MAX_RENDER_SIDE)
+    render_scale: int = 2
+    # what updates the map, as ``mapupdate run --method``: "paper" (the updater), "none",
+    # "remap", "fuse" or "hybrid" (``onboard.methods``); an unknown name is refused
+    # (``MethodError``) with the nearest valid one
+    method: str = "paper"
 
 
 class WarehouseMapUpdateEnv(gym.Env):
@@ -96,39 +163,11 @@ class WarehouseMapUpdateEnv(gym.Env):
 
     * ``scenario``: built-in name, YAML path or ``sim.Scenario`` (default: the warehouse).
     * ``session``: an update session's name or index (default 1, the first after mapping).
-    * ``quick``: cut the update routes as ``mapupdate run --quick`` does.
-    * ``reference_map``: M_{i-1} (``OccupancyGrid`` or map_server YAML); default M1, built by the
-      mapping session as the runner builds it (kept per scenario and seed).
-    * ``initial_map``: M1 for the runner's second localiser; default the reference map if one
-      is given, else M1.
-    * ``map_seed``: seed of the mapping run that builds M1 (default: the episode's seed).
-    * ``control_period``: [s] how long an action is held, a whole number of physics steps
-      (default one step, 0.05 s in the warehouse: the rate the runner's robot is driven at),
-      at most 60 s (``MAX_CONTROL_PERIOD``).
-    * ``map_observation``: add the map image to the observation.
-    * ``reward_fn``: see Rewards. ``lost_distance`` [m] (0.5).
-    * ``waypoint_tolerance`` [m] (0.3), ``goal_tolerance`` [m] (0.05): see Episode End.
-    * ``config``: the robot software's configuration as ``mapupdate run --config`` reads it,
-      a dict ``{"updater": {...}, "localizer": {...}, "pose_check": {...}}`` (each section
-      optional; keys the fields of ``UpdaterConfig``, ``LocalizerConfig``,
-      ``PoseCheckConfig``), a YAML path or a ``onboard.robot_config.RobotConfig``. An unknown
-      section or key is refused (``ConfigError``) with the nearest valid name.
-    * ``profile``: the defaults the configuration starts from, ``"robot"`` (default, what a
-      robot should run) or ``"paper"`` (the paper and its authors' code), as ``mapupdate run
-      --profile``; ``config``'s keys are laid over it key by key.
-    * ``updater_config``, ``localizer_config``: as for the runner (not beside the same section
-      of ``config``); ``pose_check`` (None: the profile's, on for robot): whether the pose
-      check runs.
-    * ``render_mode``: ``"rgb_array"`` for a top view; ``render_scale`` pixels per cell (2),
-      a whole number >= 1 that keeps the picture within 4096 px a side (``MAX_RENDER_SIDE``).
-
-    A bad argument is refused with a ``ValueError`` naming it and its value, before any work:
-    a ``control_period`` outside (0, 60] s, NaN or inf; a negative or non-integer ``map_seed``;
-    an unknown ``render_mode``; a NaN or negative ``lost_distance`` (inf: never lost); a
-    negative, NaN or infinite ``waypoint_tolerance`` or ``goal_tolerance``.
-    * ``method``: what updates the map, as ``mapupdate run --method``: ``paper`` (the
-      updater, default), ``none``, ``remap``, ``fuse`` or ``hybrid`` (``onboard.methods``);
-      an unknown name is refused (``MethodError``) with the nearest valid one.
+    * every other setting by keyword (``quick=True``, ``profile="paper"``, ...), each a field of
+      ``EnvOptions``, where each is described; or a whole record, ``options=EnvOptions(...)``,
+      which keywords given beside it override. An unknown keyword is refused
+      (``EnvOptionsError``, a ``ValueError``) in one line with the nearest setting's name; a
+      bad value as ``EnvOptions`` says, before any work.
 
     ## Version History
 
@@ -144,54 +183,50 @@ class WarehouseMapUpdateEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, scenario=None, session: int | str = 1, *, quick: bool = False,
-                 reference_map: OccupancyGrid | str | Path | None = None,
-                 initial_map: OccupancyGrid | str | Path | None = None,
-                 map_seed: int | None = None, control_period: float | None = None,
-                 map_observation: bool = False, reward_fn=None, lost_distance: float = 0.5,
-                 waypoint_tolerance: float = 0.3, goal_tolerance: float = 0.05,
-                 updater_config=None, localizer_config=None, pose_check: bool | None = None,
-                 config=None, profile: str | None = None, render_mode: str | None = None,
-                 render_scale: int = 2, method: str = "paper"):
-        _check_arguments(control_period=control_period, map_seed=map_seed,
-                         render_mode=render_mode, render_modes=self.metadata["render_modes"],
-                         render_scale=render_scale, lost_distance=lost_distance,
-                         waypoint_tolerance=waypoint_tolerance, goal_tolerance=goal_tolerance)
-        robot = load_robot_config(config, source="config", profile=profile)
-        self.method = check_method(method, "method")
-        self.scenario = _load_scenario(scenario, quick)
+    def __init__(self, scenario=None, session: int | str = 1, *,
+                 options: EnvOptions | Mapping | None = None, **settings):
+        self.options = o = _env_options(options, settings)
+        _check_arguments(control_period=o.control_period, map_seed=o.map_seed,
+                         render_mode=o.render_mode, render_modes=self.metadata["render_modes"],
+                         render_scale=o.render_scale, lost_distance=o.lost_distance,
+                         waypoint_tolerance=o.waypoint_tolerance,
+                         goal_tolerance=o.goal_tolerance)
+        robot = load_robot_config(o.config, source="config", profile=o.profile)
+        self.method = check_method(o.method, "method")
+        self.scenario = _load_scenario(scenario, o.quick)
         self.session_index = self.scenario.session_index(session)
         if self.scenario.sessions[self.session_index].mapping:
             raise sim.ScenarioError(f"session {self.scenario.sessions[self.session_index].name!r}"
                                     f" builds the initial map; choose an update session")
-        self.render_mode, self.render_scale = render_mode, int(render_scale)
-        self._reference = _load_grid(reference_map, "reference_map")
-        self._initial = _load_grid(initial_map, "initial_map")
-        if render_mode is not None:
+        self.render_mode, self.render_scale = o.render_mode, int(o.render_scale)
+        self._reference = _load_grid(o.reference_map, "reference_map")
+        self._initial = _load_grid(o.initial_map, "initial_map")
+        if o.render_mode is not None:
             _check_render_size(self.render_scale, sim.grid_frame(self.scenario)
                                if self._reference is None else self._reference)
-        self._map_seed = map_seed
+        self._map_seed = o.map_seed
         dt = 1.0 / self.scenario.physics_hz
-        period = dt if control_period is None else float(control_period)
+        period = dt if o.control_period is None else float(o.control_period)
         self._n_physics = round(period / dt)
         if self._n_physics < 1 or abs(self._n_physics * dt - period) > 1e-9:
             raise ValueError(f"control_period {period} s is not a whole number of physics steps "
                              f"of {dt} s")
         self.control_period = self._n_physics * dt
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.control_period}
-        self._map_observation = bool(map_observation)
-        self._reward_fn = default_reward if reward_fn is None else reward_fn
-        self.lost_distance = float(lost_distance)
-        self.waypoint_tolerance, self.goal_tolerance = float(waypoint_tolerance), \
-            float(goal_tolerance)
+        self._map_observation = bool(o.map_observation)
+        self._reward_fn = default_reward if o.reward_fn is None else o.reward_fn
+        self.lost_distance = float(o.lost_distance)
+        self.waypoint_tolerance, self.goal_tolerance = float(o.waypoint_tolerance), \
+            float(o.goal_tolerance)
         # as the runner has them: the profile's, the keys given over it
         keys = robot.given
-        self._options = resolve_profile(self.scenario, RunOptions(
+        self._run_options = resolve_profile(self.scenario, RunOptions(
             profile=robot.profile,
-            updater_config=_given_once("updater", updater_config,
+            updater_config=_given_once("updater", o.updater_config,
                                        robot.updater if "updater" in keys else None),
-            localizer_config=_given_once("localizer", localizer_config, keys.get("localizer")),
-            pose_check=pose_check, pose_check_config=robot.pose_check))
+            localizer_config=_given_once("localizer", o.localizer_config,
+                                         keys.get("localizer")),
+            pose_check=o.pose_check, pose_check_config=robot.pose_check))
         self._route = np.asarray(self.scenario.sessions[self.session_index].route, np.float64)
         self.action_space, self.observation_space = self._spaces()
         self.world = None
@@ -233,10 +268,10 @@ class WarehouseMapUpdateEnv(gym.Env):
         seeds = session_seeds(episode_seed, len(scn.sessions))
         self.world = sim.World(scn, i, seeds[i]["world"])
         self.session = UpdateSession(scn, i, self.world, reference, initial,
-                                     seeds[i]["localizer"], self._options.updater_config,
-                                     self._options.localizer_config,
-                                     pose_check=self._options.pose_check,
-                                     pose_check_config=self._options.pose_check_config,
+                                     seeds[i]["localizer"], self._run_options.updater_config,
+                                     self._run_options.localizer_config,
+                                     pose_check=self._run_options.pose_check,
+                                     pose_check_config=self._run_options.pose_check_config,
                                      method=self.method)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]
@@ -336,6 +371,23 @@ class WarehouseMapUpdateEnv(gym.Env):
             "waypoints_reached": int(self._next_waypoint),
             "seed": self._seed,
         }
+
+
+def _env_options(options, settings: dict) -> EnvOptions:
+    """``options`` (an ``EnvOptions``, a mapping of its fields or None) with ``settings`` laid
+    over it; an unknown name is refused in one line with the nearest setting's."""
+    names = [f.name for f in fields(EnvOptions)]
+    if isinstance(options, Mapping):
+        settings = {**options, **settings}
+        options = None
+    elif options is not None and not isinstance(options, EnvOptions):
+        raise EnvOptionsError(f"options must be an EnvOptions or a mapping of its fields, got "
+                              f"{type(options).__name__}")
+    for key in settings:
+        if key not in names:
+            hint = did_you_mean(key, names) or f" (settings: {', '.join(names)})"
+            raise EnvOptionsError(f"WarehouseMapUpdateEnv: unknown setting {key!r}{hint}")
+    return replace(EnvOptions() if options is None else options, **settings)
 
 
 MAX_CONTROL_PERIOD = 60.0     # [s] an action held longer than a minute is a mistake (1e6 hangs)

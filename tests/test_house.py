@@ -166,3 +166,17 @@ def test_no_frozen_copy_of_old_code_is_kept():
         found += [os.path.relpath(os.path.join(folder, d), ROOT) for d in subfolders
                   if d.endswith("_before")]
     assert found == []
+
+
+def test_no_file_of_the_product_is_over_800_lines_nor_a_function_over_12_parameters():
+    """What test_house_updater checks of the updater, over the whole product: a file a reader
+    can take in, and no long argument list on the Python side (numba kernels aside, told
+    apart by their decorator)."""
+    from test_house_updater import MAX_LINES, MAX_PARAMETERS, functions, is_kernel, parameters
+
+    long_files = [f"{p.relative_to(ROOT)}: {n}" for p in product_files()
+                  if (n := len(p.read_text().splitlines())) > MAX_LINES]
+    long_lists = [f"{p.relative_to(ROOT)}: {f.name} ({parameters(f)})" for p in product_files()
+                  for f in functions(ast.parse(p.read_text()))
+                  if parameters(f) > MAX_PARAMETERS and not is_kernel(f)]
+    assert long_files == [] and long_lists == []

@@ -16,8 +16,8 @@ from numba import njit
 
 from gridmap.cells import FREE, OCCUPIED
 
-from .hit_tiles import TILE_SHIFT as HIT_TILE_SHIFT
 from ._shared import bit_get, confirmed, flag_count, is_open_unknown, popcount16, set_bit
+from .hit_tiles import TILE_SHIFT as HIT_TILE_SHIFT
 
 HIT_TILE_MASK = (1 << HIT_TILE_SHIFT) - 1
 # ``settled``'s bound past every buffer: none is settled

@@ -26,8 +26,8 @@ from numba import njit
 from gridmap._kernels import clear_exit, segment_start, steps_to
 from gridmap.cells import FREE, OCCUPIED
 
-from ._shared import CHANGE, CLEAR_SHIFT, UNCHANGED
 from ._classify import ends_in_unknown
+from ._shared import CHANGE, CLEAR_SHIFT, UNCHANGED
 
 # What a fused walk flags: the free cells, the occupied-or-unknown ones, or the open unknown.
 WALK_FREE = 0

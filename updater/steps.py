@@ -30,9 +30,7 @@ from gridmap import Scan
 from ._arguments import DISTANCES, SETTINGS, Buffers, MapCells, Work, layout_record
 from .config import UpdaterConfig
 from .hit_tiles import HitTiles
-from .verdicts import BeamVerdict
 
-SKIPPED, CHANGE = int(BeamVerdict.SKIPPED), int(BeamVerdict.CHANGE)
 NO_BITS = np.zeros(0, np.uint8)     # no enclosed regions: the classifier reads none
 
 

@@ -137,11 +137,13 @@ def _steps(path: pathlib.Path) -> list[str]:
 def test_only_the_pipeline_steps_the_localiser_and_the_updater():
     """Front ends (the session, the log replay, the ROS node, the gym env) go through the
     pipeline: nothing else calls ``MapUpdater.process`` or ``MonteCarloLocalizer.update``."""
-    inside = _steps(ROOT / "robot" / "pipeline.py")
-    elsewhere = [c for pkg in ("robot", "scenarios", "studies", "mapupdate")
+    inside = _steps(ROOT / "onboard" / "pipeline.py")
+    elsewhere = [c for pkg in ("onboard", "scenarios", "studies", "mapupdate")
                  for p in sorted((ROOT / pkg).rglob("*.py"))
                  if p.name != "pipeline.py" for c in _steps(p)]
     assert len(inside) == 2 and elsewhere == []
+    assert all((ROOT / pkg / "__init__.py").is_file()
+               for pkg in ("onboard", "scenarios", "studies", "mapupdate"))
 
 
 class Shift:

@@ -157,17 +157,14 @@ def graph(tmp_path_factory):
     g.close()
 
 
-# the recording player (ros/tools/play.py) in a robot's namespace: rclpy.init() reads
-# sys.argv, so the remapping arguments go there (play.py's own command line takes none)
+# the recording player (ros/tools/play.py) in a robot's namespace, as its --namespace does
 PLAY_IN_NAMESPACE = """
 import importlib.util, sys
 bag, namespace, rate, tools = sys.argv[1:5]
 spec = importlib.util.spec_from_file_location("play", f"{tools}/play.py")
 play = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(play)
-sys.argv = [sys.argv[0], "--ros-args", "-r", f"__ns:=/{namespace}", "-r", "/tf:=tf",
-            "-r", "/tf_static:=tf_static"]
-sys.exit(play.main(bag, float(rate), "tf"))
+sys.exit(play.main(bag, float(rate), "tf", namespace=namespace))
 """
 
 # the operator: one client per node's ~/commit; each request sent when its robot's name

@@ -7,9 +7,11 @@ Nav2's amcl). In the recording's time order, at ``--rate`` times real time, with
 recording's stamps. It starts once every topic has a subscriber (a scan sent before would be
 lost). ``--flip-laser``: as if the lidar were mounted upside down (rolled by pi) at the same
 place and yaw: its /tf_static mount says so, and each scan is sent as that lidar sees the same
-beams (each angle negated).
+beams (each angle negated). ``--namespace robot1``: into a robot's namespace
+(``/robot1/scan``, ``/robot1/tf``, ...), as a fleet's node there reads them (docs/ros2.md).
 
     python ros/tools/play.py BAG [--rate 1] [--poses tf|amcl_pose] [--flip-laser]
+                             [--namespace NS]
 """
 
 from __future__ import annotations
@@ -128,14 +130,15 @@ def _records(bag: str, poses: str) -> tuple[list, list]:
     return records, static
 
 
-def main(bag: str, rate: float, poses: str = "tf", flip: bool = False) -> int:
+def main(bag: str, rate: float, poses: str = "tf", flip: bool = False,
+         namespace: str | None = None) -> int:
     if not (math.isfinite(rate) and 0 < rate <= 1000):
         raise MapUpdatingError(f"--rate must be a number in (0, 1000], got {rate:g}")
     records, static = _records(bag, poses)
     if flip and poses != "tf":
         raise MapUpdatingError("--flip-laser needs --poses tf (the mount is on /tf_static)")
     lasers = {r.frame_id for r in records if isinstance(r, ScanRecord)} if flip else set()
-    rclpy.init()
+    rclpy.init(args=None if namespace is None else remapped_into(namespace))
     node = rclpy.create_node("recording_player")
     pubs = _publishers(node, poses, lasers)
     if static:
@@ -162,6 +165,17 @@ def main(bag: str, rate: float, poses: str = "tf", flip: bool = False) -> int:
     return 0
 
 
+def remapped_into(namespace: str) -> list[str]:
+    """ROS arguments that put the player in ``namespace``, /tf and /tf_static included (they
+    are absolute names, as in Nav2)."""
+    name = namespace.strip("/")
+    if not name or not all(part.isidentifier() for part in name.split("/")):
+        raise MapUpdatingError(f"--namespace must be a ROS name such as robot1, got "
+                               f"{namespace!r}")
+    return ["play", "--ros-args", "-r", f"__ns:=/{name}", "-r", "/tf:=tf", "-r",
+            "/tf_static:=tf_static"]
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(prog="ros/tools/play.py",
                                  description="replay a recording into a ROS 2 graph")
@@ -171,9 +185,11 @@ if __name__ == "__main__":
                     help="/tf and /tf_static (tf), or /odom and /amcl_pose")
     ap.add_argument("--flip-laser", action="store_true",
                     help="as if the lidar were mounted upside down at the same place")
+    ap.add_argument("--namespace", default=None,
+                    help="a robot's namespace to play into (its /tf and /tf_static too)")
     a = ap.parse_args()
     try:
-        sys.exit(main(a.bag, a.rate, a.poses, a.flip_laser))
+        sys.exit(main(a.bag, a.rate, a.poses, a.flip_laser, a.namespace))
     except (MapUpdatingError, OSError) as e:
         print(f"play.py: error: {' '.join(str(e).split())}", file=sys.stderr)
         sys.exit(2)

@@ -450,6 +450,9 @@ def run_fleet(scenario=None, options: FleetOptions | None = None, out: Path | No
     record: its options and one row per update session."""
     options = options or FleetOptions()
     options.check()
+    if options.store is not None:       # a store that cannot be used is said before any work
+        from mapstore import open_store
+        open_store(options.store, create=True).close()
     scn = sim.load_scenario(find_scenario(scenario))
     if options.quick:
         scn = sim.quick_variant(scn)

@@ -81,21 +81,32 @@ def changes_between(before: np.ndarray, after: np.ndarray) -> CellChanges:
     return CellChanges(index.astype(np.int64), a[index].copy(), b[index].copy())
 
 
+def pack_cells_values(index: np.ndarray, values: list[np.ndarray]) -> tuple[bytes, bytes]:
+    """(index, values) blobs of cells and a few int8 values each. The indices are stored as
+    gaps from the one before (uint32, zlib): changes come in patches, so most gaps are 1 and
+    compress to almost nothing."""
+    gaps = np.diff(index, prepend=0).astype(np.uint32)
+    stacked = np.stack(values).astype(np.int8)
+    return zlib.compress(gaps.tobytes(), LEVEL), zlib.compress(stacked.tobytes(), LEVEL)
+
+
+def unpack_cells_values(index_blob: bytes, values_blob: bytes, rows: int, what: str
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """(flat indices, ``rows`` x n values) from ``pack_cells_values``'s blobs."""
+    gaps = np.frombuffer(zlib.decompress(bytes(index_blob)), dtype=np.uint32)
+    values = np.frombuffer(zlib.decompress(bytes(values_blob)), dtype=np.int8)
+    if values.size != rows * gaps.size:
+        raise ValueError(f"{gaps.size} {what} cells stored with {values.size} values")
+    return np.cumsum(gaps, dtype=np.int64), values.reshape(rows, -1).copy()
+
+
 def pack_changes(changes: CellChanges) -> tuple[bytes, bytes]:
-    """(index, values) blobs. The indices are stored as gaps from the one before (uint32,
-    zlib): changes come in patches, so most gaps are 1 and compress to almost nothing."""
-    gaps = np.diff(changes.index, prepend=0).astype(np.uint32)
-    values = np.stack([changes.before, changes.after]).astype(np.int8)
-    return zlib.compress(gaps.tobytes(), LEVEL), zlib.compress(values.tobytes(), LEVEL)
+    return pack_cells_values(changes.index, [changes.before, changes.after])
 
 
 def unpack_changes(index_blob: bytes, values_blob: bytes) -> CellChanges:
-    gaps = np.frombuffer(zlib.decompress(bytes(index_blob)), dtype=np.uint32)
-    values = np.frombuffer(zlib.decompress(bytes(values_blob)), dtype=np.int8)
-    if values.size != 2 * gaps.size:
-        raise ValueError(f"{gaps.size} changed cells stored with {values.size} values")
-    values = values.reshape(2, -1)
-    return CellChanges(np.cumsum(gaps, dtype=np.int64), values[0].copy(), values[1].copy())
+    index, (before, after) = unpack_cells_values(index_blob, values_blob, 2, "changed")
+    return CellChanges(index, before, after)
 
 
 def apply_changes(data: np.ndarray, changes: CellChanges) -> np.ndarray:

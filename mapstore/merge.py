@@ -8,14 +8,15 @@ made it unknown; unknown floor seen free by one robot and occupied by the other)
 session was committed later (``newer``). The store keeps every conflict's cell with the base's,
 both sides' and the chosen value, so an operator can see what was settled and how.
 
-Only ``numpy``: the store calls this with its maps' cells."""
+Only ``numpy`` and the store's cell packing: the store calls this with its maps' cells."""
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
+
+from . import cells
 
 RULE = "newer"
 RULE_TEXT = "a conflict goes to the side committed last"
@@ -74,20 +75,12 @@ def three_way(base: np.ndarray | None, ours: np.ndarray, theirs: np.ndarray,
     return Merge(merged.reshape(ours.shape), conflicts, counts)
 
 
-def pack_conflicts(c: Conflicts, level: int = 1) -> tuple[bytes, bytes]:
-    """(index, values) blobs, as the store keeps changes: gaps between flat indices (uint32)
-    and the four values of each cell (int8), each zlib'd."""
-    import zlib
-    gaps = np.diff(c.index, prepend=0).astype(np.uint32)
-    values = np.stack([c.base, c.ours, c.theirs, c.chosen]).astype(np.int8)
-    return zlib.compress(gaps.tobytes(), level), zlib.compress(values.tobytes(), level)
+def pack_conflicts(c: Conflicts) -> tuple[bytes, bytes]:
+    """(index, values) blobs, as the store keeps changes: each cell's four values."""
+    return cells.pack_cells_values(c.index, [c.base, c.ours, c.theirs, c.chosen])
 
 
 def unpack_conflicts(index_blob: bytes, values_blob: bytes) -> Conflicts:
-    gaps = np.frombuffer(zlib.decompress(bytes(index_blob)), dtype=np.uint32)
-    values = np.frombuffer(zlib.decompress(bytes(values_blob)), dtype=np.int8)
-    if values.size != 4 * gaps.size:
-        raise ValueError(f"{gaps.size} conflicting cells stored with {values.size} values")
-    v = values.reshape(4, -1)
-    return Conflicts(np.cumsum(gaps, dtype=np.int64), v[0].copy(), v[1].copy(), v[2].copy(),
-                     v[3].copy())
+    index, (base, ours, theirs, chosen) = cells.unpack_cells_values(
+        index_blob, values_blob, 4, "conflicting")
+    return Conflicts(index, base, ours, theirs, chosen)

@@ -320,7 +320,7 @@ class Store:
         result = merge.three_way(base_data, ours_grid.data, theirs_grid.data, theirs_wins)
         grid = OccupancyGrid(result.data, ours_grid.resolution, ours_grid.origin)
         return _Merged(base, theirs_wins, result, grid, _packed(grid, ours_grid),
-                       merge.pack_conflicts(result.conflicts, cells.LEVEL))
+                       merge.pack_conflicts(result.conflicts))
 
     def _write_merge(self, ours: int, theirs: int, m: "_Merged", status: str) -> int:
         """Write a merge as a new version whose parents are ``ours`` and ``theirs`` and

@@ -20,6 +20,9 @@ from gridmap import FREE, OCCUPIED, OccupancyGrid, save_map
 from gridmap.atomic import write_atomically, write_with
 from robotlogs.tum import write_tum
 
+from .report_sessions import (draw_sessions_figure, over_the_sessions, run_figures,
+                              update_sessions)
+
 
 def write_session_maps(out_dir: Path, result) -> None:
     """M_i and G_i of one session as map_server YAML + PGM."""
@@ -87,12 +90,22 @@ def render_report(metrics: dict) -> str:
         return "\n".join(out) + "\n"
     # the paper profile's updater on the same scans and poses, beside the run's own
     compared = all("comparison" in s for s in sessions)
+    # first, so a long run's report opens on where it went rather than on hundreds of rows
+    out += over_the_sessions(sessions)
     out += _table_one(sessions, compared) + _table_two(sessions)
     out += _change_table(sessions, compared, metrics.get("profile") or "paper")
     out += _resources_table(sessions)
-    out += ["", "Figures: `fig_maps_<session>.png` (M(i-1), M(i), G(i); removed cells red, "
-            "added green), `fig_trajectories_<session>.png`, `fig_metrics.png`.", ""]
+    out += ["", _figures_line(metrics), ""]
     return "\n".join(out)
+
+
+def _figures_line(metrics: dict) -> str:
+    about = {"fig_metrics.png": "`fig_metrics.png`",
+             "fig_sessions.png": "`fig_sessions.png` (precision and recall, OPDF of M(i) and of "
+                                 "the oracle, ghost cells, over the sessions)"}
+    return ("Figures: `fig_maps_<session>.png` (M(i-1), M(i), G(i); removed cells red, added "
+            "green), `fig_trajectories_<session>.png`, "
+            + ", ".join(about[name] for name in run_figures(metrics)) + ".")
 
 
 def _table_one(sessions, compared: bool) -> list[str]:
@@ -267,6 +280,17 @@ def write_summary_figure(out_dir: Path, metrics: dict) -> None:
     plt.close(fig)
 
 
+def write_sessions_figure(out_dir: Path, metrics: dict) -> None:
+    """fig_sessions.png: precision, recall, OPDF and ghost cells as lines over the sessions."""
+    sessions = update_sessions(metrics)
+    if not sessions:
+        return
+    plt = _pyplot()
+    fig = draw_sessions_figure(plt, sessions)
+    _save_fig(fig, Path(out_dir) / "fig_sessions.png")
+    plt.close(fig)
+
+
 def json_default(o):
     if isinstance(o, (np.integer,)):
         return int(o)
@@ -278,7 +302,8 @@ def json_default(o):
 
 
 def write_outputs(run) -> None:
-    """What covers the whole run: metrics.json, report.md and fig_metrics.png. Each session's
+    """What covers the whole run: metrics.json, report.md, fig_metrics.png (up to 12 update
+    sessions) and fig_sessions.png (``report_sessions.run_figures``). Each session's
     maps, trajectories and figures were written when it ended (``write_session_maps``,
     ``write_session_outputs``) and are not written again: ``run.sessions`` no longer holds
     what they are drawn from."""
@@ -286,4 +311,6 @@ def write_outputs(run) -> None:
     write_atomically(out_dir / "metrics.json",
                       json.dumps(run.metrics, indent=2, default=json_default) + "\n")
     write_atomically(out_dir / "report.md", render_report(run.metrics))
-    write_summary_figure(out_dir, run.metrics)
+    writers = {"fig_metrics.png": write_summary_figure, "fig_sessions.png": write_sessions_figure}
+    for name in run_figures(run.metrics):
+        writers[name](out_dir, run.metrics)

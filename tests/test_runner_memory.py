@@ -106,7 +106,7 @@ def test_every_output_is_written_with_its_old_name(played):
     out = tmp / "run"
     updates = NAMES[1:]
     top = {p.name for p in out.iterdir() if p.is_file()}
-    assert top == {"metrics.json", "report.md", "fig_metrics.png",
+    assert top == {"metrics.json", "report.md", "fig_metrics.png", "fig_sessions.png",
                    *(f"fig_{kind}_{n}.png" for n in updates for kind in ("maps",
                                                                           "trajectories"))}
     maps = {p.name for p in (out / "maps").iterdir()}

@@ -55,7 +55,7 @@ def one_case(job):
     from onboard.logmap import map_from_log
     from onboard.replay import LogSource, Outputs, update_from_log
 
-    name, seed, people, work, overrides, methods = job
+    name, seed, people, work, overrides, methods, twice = job
     log = DATA / f"{name}.log.gz"
     work = Path(work)
     map_path = work / f"{name}.yaml"
@@ -69,12 +69,24 @@ def one_case(job):
     for method in methods:
         placement, cfg = method_placement(method, overrides)
         out = case_dir / f"out-{method}.yaml"
+        kind = method if method in ("hybrid", "fuse") else "paper"
+        state = case_dir / f"state-{method}.npz" if twice and kind == "paper" else None
         s = update_from_log(case_dir / "stale.yaml", LogSource(case_dir / "log.clf"),
-                            Outputs(out), placement, updater_config=cfg,
-                            method=method if method in ("hybrid", "fuse") else "paper")
+                            Outputs(out, state=state), placement, updater_config=cfg,
+                            method=kind)
         sc = score_case(case_dir, load_map(out))
         rows.append({"log": name, "seed": seed, "people": people, "method": method,
                      "processed": s["scans_processed"], "scans": s["scans"], **sc})
+        if state is not None:
+            # the same recording again as the next session, from the map the first made and
+            # with what the state carries (the faces rule acts once two sessions agree)
+            again = case_dir / f"out-{method}-2.yaml"
+            s = update_from_log(out, LogSource(case_dir / "log.clf"),
+                                Outputs(again, state=state), placement, updater_config=cfg,
+                                method=kind, new_session=True)
+            rows.append({"log": name, "seed": seed, "people": people,
+                         "method": f"{method}, 2nd session", "processed": s["scans_processed"],
+                         "scans": s["scans"], **score_case(case_dir, load_map(again))})
     return rows
 
 
@@ -110,6 +122,9 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--no-partly-mapped", action="store_true",
                     help="skip the partly mapped places")
+    ap.add_argument("--twice", action="store_true",
+                    help="each case's recording played again as the next session (the state "
+                         "carried, `update --state --new-session`), scored too")
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                     help="updater keys over the robot's defaults (YAML values), to try others")
     args = ap.parse_args(argv)
@@ -124,8 +139,8 @@ def main(argv=None) -> int:
         for name in args.logs:                       # maps first, once each
             from onboard.logmap import map_from_log
             map_from_log(DATA / f"{name}.log.gz", Path(tmp) / f"{name}.yaml", progress=False)
-        jobs = [(n, s, p, tmp, overrides, args.methods) for n in args.logs for s in args.seeds
-                for p in args.people]
+        jobs = [(n, s, p, tmp, overrides, args.methods, args.twice) for n in args.logs
+                for s in args.seeds for p in args.people]
         with ProcessPoolExecutor(args.workers) as pool:
             rows = [r for rows in pool.map(one_case, jobs) for r in rows]
             grown = [] if args.no_partly_mapped else list(pool.map(
@@ -206,7 +221,7 @@ def report(rows, out: Path) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in dict.fromkeys(r["log"] for r in rows):
         for people in sorted({r["people"] for r in rows}):
-            for m in METHODS:
+            for m in dict.fromkeys(r["method"] for r in rows):
                 sel = [r for r in rows if r["log"] == name and r["people"] == people
                        and r["method"] == m]
                 if not sel:
@@ -218,11 +233,11 @@ def report(rows, out: Path) -> int:
     ok = True
     print("\npooled over the cases (removed freed, added drawn; the same on cells seen 3+ times):")
     for people in sorted({r["people"] for r in rows}):
-        for m in METHODS:
+        for m in dict.fromkeys(r["method"] for r in rows):
             sel = [r for r in rows if r["people"] == people and r["method"] == m]
             if not sel:
                 continue
-            print(f"  people {people}, {m:8s}: {shares(sel).replace(' | ', ', ')}; false "
+            print(f"  people {people}, {m:20s}: {shares(sel).replace(' | ', ', ')}; false "
                   f"occupied {sum(r['false_occupied'] for r in sel)}, walls freed "
                   f"{sum(r['walls_freed'] for r in sel)}, ghosts {sum(r['ghosts'] for r in sel)}")
         sel = [r for r in rows if r["people"] == people and r["method"] == "robot"]

@@ -82,6 +82,8 @@ class SessionRow:
     ape_rmse: float      # [m] of the localiser on M_{i-1}
     ghosts: int = 0      # occupied cells of M_i far from G_i's that a person covered
     g_freed: int = 0     # cells occupied in G_i that the session freed
+    standing_freed: int = 0  # ... of them, cells of a wall, rack or object the session did
+                             # not move
 
 
 # --- the rearrangements -------------------------------------------------------------------------
@@ -257,6 +259,7 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
     previous = m1
     last_targets = np.zeros(m1.shape, bool)
     last_truth = None
+    faces = None
     options = runner.RunOptions(progress=False, pose_check=pose_check, profile=profile,
                                 updater_config=updater_config, method=method,
                                 compare_paper=False)
@@ -264,7 +267,7 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
     for i in range(1, len(scn.sessions)):
         t0 = time.perf_counter()
         with PeakMemory() as mem:
-            res = runner.run_update_session(scn, i, previous, m1, seeds[i], options)
+            res = runner.run_update_session(scn, i, previous, m1, seeds[i], options, faces)
         wall = time.perf_counter() - t0
         m = res.metrics
         cd, r, mm = m["change_detection"], m["resources"], m["map_metrics"]
@@ -285,8 +288,11 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
                                mm["updated_vs_truth"]["opdf"], mm["oracle_vs_truth"]["opdf"],
                                m["localization"]["previous_map"]["rmse"], m["ghost_cells"],
                                int(((res.truth.data == OCCUPIED) & (res.updated.data == FREE)
+                                    & (previous.data != FREE)).sum()),
+                               int((standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
+                                    & (res.updated.data == FREE)
                                     & (previous.data != FREE)).sum())))
-        previous = res.updated
+        previous, faces = res.updated, res.faces
         last_targets = targets
         last_truth = res.truth
         del res                      # keep only what the next session needs
@@ -295,6 +301,18 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
             print(f"  {row.name}: {row.peak_rss_mb:.0f} MB, P {_f(row.precision)}, "
                   f"R {_f(row.recall)}, {row.wall_s:.1f} s", file=sys.stderr, flush=True)
     return rows
+
+
+def standing_cells(scn, session: int, frame) -> np.ndarray:
+    """Bool (H, W) of ``frame``: the cells of the walls, the static objects and the movable
+    objects that stand in session ``session`` where they stood in the session before."""
+    from sim import geometry as geo
+    from sim.groundtruth import covered_cells
+
+    before = {o.id: o for o in scn.obstacles(session - 1)}
+    kept = [o for o in scn.obstacles(session) if before.get(o.id) == o]
+    boxes, circles = geo.obstacle_arrays(kept, scn.world.bounds, scn.world.wall_thickness)
+    return covered_cells(frame, boxes, circles)
 
 
 def _f(v, digits=3) -> str:

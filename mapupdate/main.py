@@ -142,7 +142,13 @@ def _add_update(sub) -> None:
                      help="YAML path of the updated map (optional with --store)")
     upd.add_argument("--state", type=Path, default=None,
                      help="updater state file: loaded if present, saved at the end (method "
-                          "paper only)")
+                          "paper only). The log continues the state's session when --map is "
+                          "the map that session started from, and is the next session when "
+                          "--map is the map it made")
+    upd.add_argument("--new-session", action="store_true",
+                     help="with --state: the log is a new session on --map, carrying only "
+                          "what the state keeps from session to session (the faces rule's "
+                          "counts)")
     upd.add_argument("--method", default="paper", metavar="NAME",
                      help="what updates the map: paper (the updater, default), fuse (log-odds "
                           "mapping on the map as the prior), hybrid (the paper's detector "

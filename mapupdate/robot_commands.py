@@ -25,7 +25,7 @@ from onboard.outputs import check_outputs, map_files, map_inputs
 from onboard.replay import LogSource, Outputs, Placement
 from onboard.robot_config import load_robot_config
 from onboard.ros1.node import run_node
-from robotlogs import LogLimits, log_observations
+from robotlogs import LogError, LogLimits, log_observations
 
 from . import summaries
 from .version import __version__
@@ -53,6 +53,9 @@ def _update(args, map_path, out, trajectory):
     """Run the update of ``map_path`` from the log into ``out``; (summary, configuration)."""
     # the method and --state, then the configuration, are refused before anything is read
     replay.check_update_arguments(args.poses, args.smooth_poses, args.method, args.state)
+    if getattr(args, "new_session", False) and args.state is None:
+        raise LogError("--new-session starts the next session from a state: give --state FILE "
+                       "too (without a state every update is a new session)")
     config = load_robot_config(args.config, profile=args.profile)
     check_outputs({"--map": map_inputs(map_path), "--log": [args.log],
                    "--config": [args.config] if args.config else [],
@@ -74,7 +77,8 @@ def _update(args, map_path, out, trajectory):
     asked = args.config is not None or args.profile is not None
     summary = replay.update_from_log(map_path, log, outputs, placement, method=args.method,
                                      updater_config=config.updater if asked else None,
-                                     progress=not args.no_progress)
+                                     progress=not args.no_progress,
+                                     new_session=getattr(args, "new_session", False))
     summary.setdefault("out", str(out))
     summary["profile"], summary["differences"] = config.profile, config.differences()
     return summary, config

@@ -17,6 +17,9 @@ def update_lines(s: dict) -> list[str]:
     used = f"method {g('method', 'paper')}, poses {g('pose_source')}" + (
         f", profile {g('profile')}" if g("profile") else "")
     out = [f"wrote {g('out')}: {_changes_text(s) if changed else '0 cells changed'}; {used}"]
+    if g("state_loaded") == "next session":
+        out.append(f"  a new session from the state {g('state')} (what it carries from "
+                   "session to session; its buffers start afresh on this map)")
     if g("differences"):
         out.append(f"  configuration over the {g('profile')} profile: "
                    + "; ".join(g("differences")))

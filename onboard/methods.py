@@ -80,18 +80,19 @@ def check_method(name, source: str = "method", choices=METHODS) -> str:
     return name
 
 
-def make_method(name: str, reference: OccupancyGrid, updater_config=None):
+def make_method(name: str, reference: OccupancyGrid, updater_config=None, faces=None):
     """The method ``name`` on the reference map M_{i-1}. ``updater_config``: an
     ``updater.UpdaterConfig`` (None: the robot profile's); the baselines use its gating
-    rules."""
+    rules. ``faces``: what the last session's updater carried over (``carried_faces``), for
+    the paper's updater and the hybrid's."""
     check_method(name)
     config = UpdaterConfig.profile() if updater_config is None else updater_config
     if name == "paper":
-        return MapUpdater(reference, config)
+        return MapUpdater(reference, config, faces=faces)
     if name == "none":
         return KeepMap(reference, config)
     if name == "hybrid":
-        return HybridMethod(reference, config)
+        return HybridMethod(reference, config, faces=faces)
     return LogOddsMethod(reference, config, prior=(name == "fuse"))
 
 
@@ -235,11 +236,13 @@ class HybridMethod(MapOutput):
     draw a wall's far side from hits behind it.
     """
 
-    def __init__(self, reference: OccupancyGrid, config, radius: float = HYBRID_RADIUS):
+    def __init__(self, reference: OccupancyGrid, config, radius: float = HYBRID_RADIUS,
+                 faces=None):
         if isinstance(radius, bool) or not isinstance(radius, (int, float)) \
                 or not 0 < radius <= 5.0:
             raise MethodError(f"hybrid: radius must be a number in (0, 5] m, got {radius!r}")
-        self.paper = MapUpdater(reference, config)
+        self.paper = MapUpdater(reference, config, faces=faces)
+        self.carried_faces = self.paper.carried_faces
         self.config = self.paper.config
         self.radius = float(radius)
         self.mapper = LogOddsMapper(reference, LogOddsParams(hit_guard=1))

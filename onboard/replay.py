@@ -196,11 +196,13 @@ class Outputs:
 
 def update_from_log(map_path, log: LogSource, outputs: Outputs,
                     placement: Placement = Placement(), *, method: str = "paper",
-                    updater_config=None, progress: bool = False) -> dict:
+                    updater_config=None, progress: bool = False,
+                    new_session: bool = False) -> dict:
     """Update the map at ``map_path`` with the scans of ``log``; write ``outputs``, each
     atomically. ``method``: what updates the map, one of ``methods.ROBOT_METHODS`` (a state
     only with ``"paper"``); no ``updater_config``: ``placement.profile``'s. ``progress``: a
-    progress bar on stderr.
+    progress bar on stderr. ``new_session``: the state (``outputs.state``) starts the next
+    session on the map (``_updater``).
     Returns what happened as a dict (``mapupdate.summaries.update_lines`` says it in words)."""
     wall0 = _time.perf_counter()
     place, state_path = placement, outputs.state
@@ -215,7 +217,8 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
                              laser_mount=log.laser_mount, limits=log.limits)
     done = replay_observations(grid, found, place, method=method, updater_config=updater_config,
                                state_path=state_path, window=(log.start_time, log.end_time),
-                               log_path=log.path, progress=progress)
+                               log_path=log.path, progress=progress,
+                               new_session=new_session)
     updated = _save_outputs(done.updater, done.replay, outputs)
     return {
         "log": str(log.path), "format": found.format, "map": str(map_path),
@@ -232,19 +235,20 @@ def update_from_log(map_path, log: LogSource, outputs: Outputs,
 class ReplayRun:
     """What a replay made: the method that updated the map (its ``updated_map()`` is the
     result), the pipeline with its counters, what the replay loop gathered, the pose source it
-    used and whether the updater was loaded from a state file."""
+    used and whether the updater was loaded from a state file (True: its session continued;
+    "next session": the next session started from it)."""
 
     updater: object
     pipeline: RobotPipeline
     replay: Replay
     source: str
-    state_loaded: bool
+    state_loaded: bool | str
 
 
 def replay_observations(grid: OccupancyGrid, found, placement: Placement = Placement(), *,
                         method: str = "paper", updater_config=None, state_path=None,
-                        window=(None, None), log_path="log", progress: bool = False
-                        ) -> ReplayRun:
+                        window=(None, None), log_path="log", progress: bool = False,
+                        new_session: bool = False) -> ReplayRun:
     """The update of ``grid`` from a log's observations ``found`` (a
     ``robotlogs.LogObservations``, or anything with its ``observations``, ``total`` and
     ``has``), placed as ``placement`` says, within ``window`` (start, end [s], None for
@@ -253,7 +257,7 @@ def replay_observations(grid: OccupancyGrid, found, placement: Placement = Place
     source = _choose_source(placement.source, found.has, log_path,
                             placement.initial_pose is not None)
     updater, state_loaded = _updater(grid, updater_config, state_path, method,
-                                     placement.profile)
+                                     placement.profile, new_session)
     check = POSE_CHECK_ON[placement.profile][0] if placement.pose_check is None \
         else placement.pose_check
     # scans placed by the project's localiser are refined by the check, a log's poses only
@@ -517,12 +521,17 @@ def _refuse_clashes(log_path, map_path, state_path, out_path, trajectory_path) -
 
 
 def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper",
-             profile: str = DEFAULT_PROFILE) -> tuple[object, bool]:
+             profile: str = DEFAULT_PROFILE, new_session: bool = False
+             ) -> tuple[object, bool | str]:
     """A fresh ``method`` on ``grid`` (with ``config``, else with ``profile``'s; the baselines
-    use its gate), or the paper's
-    updater saved in ``state_path`` when that exists. A state holds its reference map whole,
-    which is its fingerprint: it is refused for any other map, and a configuration given with
-    it must be the one it was made with (its buffers follow that configuration)."""
+    use its gate), or the paper's updater of the state in ``state_path`` when that exists:
+    the same session continued when ``grid`` is the map the state's session started from
+    (True), the next session when it is the map that session made, or with ``new_session``
+    (``"next session"``: a fresh updater on ``grid`` with what the state carries from session
+    to session, ``MapUpdater.carried_faces``). A state holds its reference map whole, which is
+    its fingerprint: it is refused for any other map (but with ``new_session``, for a map in
+    another frame), and a configuration given with it must be the one it was made with (its
+    buffers follow that configuration)."""
     if isinstance(config, dict):
         config = UpdaterConfig.from_dict(config)
     elif isinstance(config, (str, Path)):
@@ -537,15 +546,24 @@ def _updater(grid: OccupancyGrid, config, state_path, method: str = "paper",
                        f"{ref.shape} at {ref.resolution} m, origin {ref.origin}; the map "
                        f"given has shape {grid.shape} at {grid.resolution} m, origin "
                        f"{grid.origin}")
-    differ = int(np.count_nonzero(ref.data != grid.data))
-    if differ:
-        raise LogError(f"{state_path}: the saved updater state belongs to another map "
-                       f"({differ} cells differ from the map given); give the map it was "
-                       "made on, or no --state to start afresh")
     if config is not None and config != upd.config:
         keys = [k for k, v in config.to_dict().items() if upd.config.to_dict().get(k) != v]
         raise LogError(f"{state_path}: the saved updater state was made with another updater "
                        f"configuration ({', '.join(keys)} differ); give the same one or none")
+    differ = int(np.count_nonzero(ref.data != grid.data))
+    if not new_session and differ:
+        made = int(np.count_nonzero(upd.updated_map().data != grid.data))
+        if made:
+            raise LogError(f"{state_path}: the saved updater state belongs to another map "
+                           f"({differ} cells differ from the map its session started from, "
+                           f"{made} from the map it made); give either of those, or "
+                           "--new-session to start a session on this map with what the "
+                           "state carries, or no --state to start afresh")
+        new_session = True          # the map the state's session made: the next session
+    if new_session:
+        # what one session hands the next: the faces rule's counts, halved; buffers and
+        # gate start afresh on the new map, as in a chained run
+        return MapUpdater(grid, upd.config, faces=upd.carried_faces()), "next session"
     return upd, True
 
 

@@ -5,7 +5,8 @@ A run's folder holds, besides its outputs, ``state/``:
 - ``run.json``: what defines the run (scenario file and a hash of its text, seed, sessions asked
   for, quick routes, the pose check, the configurations), written once at the start;
 - ``session_<name>.json`` and ``session_<name>.npz``: a finished session's metrics and
-  trajectories; its maps (M_i, G_i, the oracle, the evaluation masks) are in ``maps/``, its
+  trajectories, and ``faces_<name>.npz`` what its updater carries to the next session (the
+  faces rule's counts, ``updater.FaceCounts``); its maps (M_i, G_i, the oracle, the evaluation masks) are in ``maps/``, its
   TUM trajectories in ``trajectories/`` and its figures in the run's folder;
 - ``progress.json``: the finished sessions in order. It is written last, after everything of
   the session is on disk, so it is the commit point: a session not listed there is run again.
@@ -35,6 +36,7 @@ from gridmap import MapUpdatingError, load_map
 from gridmap.atomic import write_atomically, write_with
 from gridmap.files import read_text
 from onboard.robot_config import section_config
+from updater import FaceCounts
 
 from .catalog import find_scenario
 from .options import RunOptions
@@ -222,6 +224,11 @@ def save_session(out_dir, results: list, wall_time_s: float) -> None:
     if res.trajectory is not None:
         arrays = res.trajectory.arrays()
         write_with(folder / f"session_{res.name}.npz", lambda f: np.savez(f, **arrays))
+    if res.faces is not None:
+        counts = {"hits": res.faces.hits, "passes": res.faces.passes,
+                  "behind": res.faces.behind, "confirmed": res.faces.confirmed}
+        write_with(folder / f"faces_{res.name}.npz",
+                   lambda f: np.savez_compressed(f, **counts))
     _write_json(folder / "progress.json", {"format": FORMAT,
                                            "finished": [r.name for r in results],
                                            "wall_time_s": wall_time_s})
@@ -267,6 +274,10 @@ def load_session(out_dir, name: str, previous: str | None = None):
         res.oracle = load_map(maps / f"oracle_{name}.yaml")
         res.trajectory = _trajectory(state_dir(out_dir) / f"session_{name}.npz", Trajectory)
         res.masks = _arrays(maps / f"masks_{name}.npz")
+        faces = state_dir(out_dir) / f"faces_{name}.npz"
+        if faces.exists():
+            z = _arrays(faces, ("hits", "passes", "behind", "confirmed"))
+            res.faces = FaceCounts(z["hits"], z["passes"], z["behind"], None, z["confirmed"])
     return res
 
 

@@ -96,17 +96,19 @@ def build_initial_map(scenario, session: int, seeds: dict, progress: bool = Fals
 
 
 def run_update_session(scenario, session: int, previous: OccupancyGrid, initial: OccupancyGrid,
-                       seeds: dict, options: RunOptions) -> SessionResult:
+                       seeds: dict, options: RunOptions, faces=None) -> SessionResult:
     """One session i >= 2: the robot follows its route; localise, update M_{i-1} into M_i,
-    score against G_i."""
+    score against G_i. ``faces``: what the updater of session i - 1 carried over
+    (``SessionResult.faces``)."""
     world = sim.World(scenario, session, seeds["world"])
     options = resolve_profile(scenario, options)
     compare = options.compare_paper and options.profile != "paper" and options.method == "paper"
     us = UpdateSession(scenario, session, world, previous, initial, seeds["localizer"],
                        options.updater_config, options.localizer_config,
-                       pose_check=options.pose_check, pose_check_config=options.pose_check_config,
+                       pose_check=options.pose_check and (options.pose_check_config or True),
                        method=options.method,
-                       comparison=UpdaterConfig.profile("paper") if compare else None)
+                       comparison=UpdaterConfig.profile("paper") if compare else None,
+                       faces=faces)
     observer = options.observer
     if observer is not None:
         observer.session_start(scenario, session, world, previous, initial, us.updater,
@@ -147,10 +149,10 @@ def resolve_profile(scenario, options: RunOptions) -> RunOptions:
 
 
 def light_result(res: SessionResult, keep_map: bool = False) -> SessionResult:
-    """``res`` as a run keeps it once its outputs are on disk: name and metrics, and M_i if
-    ``keep_map``. A new object, so whoever else holds ``res`` (an observer) still has it whole."""
+    """``res`` as a run keeps it once its outputs are on disk: name and metrics, and M_i (with
+    what its updater carries over) if ``keep_map``. A new object, so whoever else holds ``res`` (an observer) still has it whole."""
     return SessionResult(res.name, res.updated if keep_map else None, None,
-                         metrics=res.metrics)
+                         metrics=res.metrics, faces=res.faces if keep_map else None)
 
 
 def default_out_dir(scenario_name: str) -> Path:
@@ -224,7 +226,7 @@ def _play(scn, path: Path, seed: int, n: int, out_dir: Path, options: RunOptions
                 # M_{i-1} is all this session needs of the last one
                 results[-1] = light_result(results[-1], keep_map=True)
                 res = run_update_session(scn, i, results[-1].updated, results[0].updated,
-                                         seeds[i], options)
+                                         seeds[i], options, results[-1].faces)
             # everything of the session on disk before save_session commits it
             write_session_maps(out_dir, res)
             write_session_outputs(out_dir, res)

@@ -82,6 +82,8 @@ class SessionResult:
     trajectory: Trajectory | None = None
     metrics: dict = field(default_factory=dict)
     masks: dict = field(default_factory=dict)  # per-cell arrays: observable, people, ...
+    # what the updater carries to the next session (``MapUpdater.carried_faces``), or None
+    faces: object | None = None
 
 
 @dataclass
@@ -107,16 +109,18 @@ class UpdateSession:
     (for the comparison), the updater on M_{i-1}, and the bookkeeping of the scores.
 
     ``localizer_seed``: both localisers use it, as the evaluation asks. ``localizer_config``:
-    by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas). ``pose_check``: the
-    safeguard of ``localization.confidence`` (scans whose pose looks unsure change nothing).
-    ``method``: what updates the map, a name of ``onboard.methods.METHODS`` (default the
-    paper's updater); ``self.updater`` is that method.
+    by default ``localizer_config_for(scenario)`` (the robot's odometry noise as alphas).
+    ``pose_check``: the safeguard of ``localization.confidence`` (scans whose pose looks unsure
+    change nothing): off (False), on with its defaults (True) or on with a
+    ``PoseCheckConfig``. ``method``: what updates the map, a name of
+    ``onboard.methods.METHODS`` (default the paper's updater); ``self.updater`` is that
+    method. ``faces``: what the last session's updater carried over.
     """
 
     def __init__(self, scenario, session: int, world, reference: OccupancyGrid,
                  initial: OccupancyGrid, localizer_seed, updater_config=None,
-                 localizer_config=None, pose_check: bool = True, pose_check_config=None,
-                 method: str = "paper", comparison=None):
+                 localizer_config=None, pose_check=True, method: str = "paper",
+                 comparison=None, faces=None):
 
         self.scenario, self.index, self.world = scenario, session, world
         self.name = scenario.sessions[session].name
@@ -134,9 +138,9 @@ class UpdateSession:
             localizer_config = localizer_config_for(scenario)
         self.localizer = MonteCarloLocalizer(reference, localizer_config, seed=localizer_seed)
         self.localizer.initialize(start, cov)
-        self.updater = make_method(method, reference, updater_config)
+        self.updater = make_method(method, reference, updater_config, faces)
         # the project's own localiser places the scans: refined as the profile says
-        check = pose_check_config if pose_check_config is not None else PoseCheckConfig()
+        check = pose_check if isinstance(pose_check, PoseCheckConfig) else PoseCheckConfig()
         guard = PoseCheck(reference, check.for_poses(own_localizer=True)) if pose_check else None
         self.pipeline = RobotPipeline(self.updater, self.localizer, guard)
         # ``comparison``: an updater configuration run beside, on the same scans at the same
@@ -265,10 +269,12 @@ class UpdateSession:
                 "change_detection": ev.change_detection(self.reference, other, self.truth,
                                                         observable),
                 "ghost_cells": ev.ghost_cells(other, self.truth, self.people_mask)}
+        carried = getattr(self.updater, "carried_faces", None)
         return SessionResult(self.name, updated, self.truth, previous=self.reference,
                              oracle=oracle, trajectory=self.trajectory, metrics=metrics,
                              masks={"observable": observable, "people": self.people_mask,
-                                    "observations": self.counter.counts})
+                                    "observations": self.counter.counts},
+                             faces=None if carried is None else carried())
 
     def scores(self) -> dict:
         """The session's entry of ``metrics.json``."""

@@ -67,7 +67,7 @@ def played(tmp_path_factory):
     full = [build_initial_map(scn, 0, seeds[0])]
     for i in range(1, len(scn.sessions)):
         full.append(run_update_session(scn, i, full[-1].updated, full[0].updated, seeds[i],
-                                       RunOptions(progress=False)))
+                                       RunOptions(progress=False), full[-1].faces))
     for res in full:
         write_session_outputs(tmp / "full", res)
     return tmp, yaml, run, full, keeper

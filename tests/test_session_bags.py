@@ -121,3 +121,37 @@ def test_bags_carry_the_sessions_map_latched_as_a_map_server_offers_it(bag_run):
                 info["rosbag2_bagfile_information"]["topics_with_message_count"]
                 if t["topic_metadata"]["name"] == "/map"]
     assert "durability: 1" in str(topic["offered_qos_profiles"])     # transient local
+
+
+def test_sessions_replayed_one_recording_each_with_the_state_carried_give_the_chained_maps(
+        tmp_path):
+    """Three update sessions recorded as bags, then replayed one recording a session through
+    `mapupdate update --state FILE --new-session` (the map of each the last one's output):
+    each map equals the chained run's, cell for cell, and the state file stays within a
+    bound set by the map's size."""
+    from updater import UpdaterConfig
+
+    config = UpdaterConfig.profile("robot", {"move_faces": True})
+    rec = SessionBagRecorder(tmp_path / "bags", "ros1")
+    run_scenario(None, RunOptions(out=tmp_path / "run", quick=True, sessions=4, progress=False,
+                                  observer=rec, updater_config=config))
+    maps = tmp_path / "run" / "maps"
+    (tmp_path / "cfg.yaml").write_text("pose_check:\n  refine_given: true\nupdater:\n"
+                                       "  move_faces: true\n")
+    state, previous, sizes = tmp_path / "life.npz", maps / "M_W1.yaml", []
+    for name in ("W2", "W3", "W4"):
+        out = tmp_path / f"{name}.yaml"
+        assert main(["update", "--map", str(previous), "--log", str(rec.paths[name]), "--out",
+                     str(out), "--state", str(state), "--new-session", "--config",
+                     str(tmp_path / "cfg.yaml"), "--smooth-poses", "0", "--no-progress"]) == 0
+        assert np.array_equal(load_map(out).data, load_map(maps / f"M_{name}.yaml").data), name
+        sizes.append(state.stat().st_size)
+        previous = out
+    # bounded: what it holds is a fixed number of bytes per cell (reference 1, buffers 2, hit
+    # buffers 2, face counts 3), compressed; it grows with the cells seen, never past that
+    cells = load_map(previous).data.size
+    assert all(size <= 8 * cells for size in sizes), (sizes, cells)
+    # the state carried something: the faces rule's counts of three sessions
+    from updater import MapUpdater
+
+    assert MapUpdater.load(state).carried_faces().hits.max() > 0

@@ -9,10 +9,11 @@ Imports nothing of this project but ``gridmap``; numba is imported on first use.
 """
 
 from .config import UpdaterConfig, UpdaterError
+from .faces import FaceCounts
 from .map_updater import MapUpdater, ScanReport, ScanStatus
 from .method import MapMethod, PoseCheckCall
 from .verdicts import BEAM_CHANGE, BEAM_INVALID, BEAM_SKIPPED, BEAM_UNCHANGED, BeamVerdict
 
-__all__ = ["UpdaterConfig", "UpdaterError", "MapUpdater", "MapMethod", "PoseCheckCall",
+__all__ = ["UpdaterConfig", "UpdaterError", "FaceCounts", "MapUpdater", "MapMethod", "PoseCheckCall",
            "ScanReport", "ScanStatus",
            "BeamVerdict", "BEAM_INVALID", "BEAM_UNCHANGED", "BEAM_SKIPPED", "BEAM_CHANGE"]

@@ -11,6 +11,8 @@ module                 step
 ``_buffers``           4. the flags into the buffers, and the hit buffers (Sec. IV-D)
 ``_decide``            4. the decision rule (Sec. IV-D): ``push_and_decide``, ``decide_all``
 ``_output``            5. the output map and the last check (Sec. IV-D, Fig. 7), made on demand
+``_faces``             faces a few cells off, counted per scan and moved at the output (not in
+                       the paper)
 ``_shared``            bit planes, flag counts and verdict codes that every step reads
 =====================  ===========================================================================
 
@@ -35,6 +37,7 @@ from ._classify import (MIN_INCIDENCE_SINE, beam_directions,  # noqa: F401
                         run_classifier, run_filter, scan_is_lost, skip_across, valid_ranges)
 from ._decide import (clear_neighbourhoods, decide, decide_all, decide_cell,  # noqa: F401
                       neighbourhood, push_and_decide, same_state)
+from ._faces import STEPS_PER_CELL, count_faces, move_faces  # noqa: F401
 from ._flags import (disc_is_free, flag_gaps, flag_hit_surfaces,  # noqa: F401
                      flag_listed_unchanged, flag_new_obstacles, flag_occupied_unchanged,
                      flag_scan, guard_needed, list_unknown_hits, mark_seen_surfaces,

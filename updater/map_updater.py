@@ -56,6 +56,7 @@ from gridmap.files import FileInputError, check_regular_file
 from . import saved_state, steps
 from ._arguments import Buffers, MapCells
 from .config import UpdaterConfig, UpdaterError
+from .faces import FaceCounts
 from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
 from .hit_tiles import HitTiles
 
@@ -132,7 +133,7 @@ class MapUpdater:
     """
 
     def __init__(self, reference_map: OccupancyGrid, config: UpdaterConfig | None = None, *,
-                 profile: str = DEFAULT_PROFILE):
+                 profile: str = DEFAULT_PROFILE, faces: FaceCounts | None = None):
         if not isinstance(reference_map, OccupancyGrid):
             raise UpdaterError(f"reference_map must be a gridmap.OccupancyGrid, got "
                                f"{type(reference_map).__name__}")
@@ -170,6 +171,7 @@ class MapUpdater:
             max_cells = int(math.floor(config.last_check_max_area / self._res**2 + 1e-9))
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
         self._cells = MapCells(self._ref, self._clear, self._enclosed)
+        self._faces = FaceCounts.start(self._ref.shape, config.move_faces, faces)
         self._state: Buffers | None = None      # the buffers as the kernels take them
         self._n_changed = 0
         # with gate_confirm_once: the cells held-back scans confirmed since the last processed
@@ -223,6 +225,8 @@ class MapUpdater:
                               changed_cells=self._n_changed, verdicts=ws.verdict.copy(),
                               sensor_pose=placed)
         n_ch, n_new, n_un, d_changed, d_drawn = flags
+        if cfg.move_faces:
+            self._faces.count(ws, sensor, cfg)
         self._n_changed += d_changed
         self._n_drawn += d_drawn
         if self._confirmed.size:
@@ -345,7 +349,17 @@ class MapUpdater:
         cells, _ = steps.close_outlines(self._ref, self._output_bits(), self._enclosed,
                                         self.config.last_check, self._drawn, spare,
                                         steps.buffer_mask(self.config))
+        if self.config.move_faces:
+            self._faces.move(self._ref, cells, self.config)
         return OccupancyGrid(cells, self._res, self._origin)
+
+    def carried_faces(self) -> FaceCounts:
+        """What the next session's updater starts from (``faces=``): the counts of the faces
+        rule (``UpdaterConfig.move_faces``), halved, and the cells it would move now. Empty
+        with the rule off. O(map): the output is worked out to find those cells."""
+        if self.config.move_faces:
+            self.updated_map()
+        return self._faces.decayed()
 
     def _output_bits(self) -> np.ndarray:
         """The decided bits, with the cells freed with their objects (``spread_removed``) and
@@ -425,7 +439,8 @@ class MapUpdater:
         arrays = (self._ref, self._clear, self._hist, self._seen, self._decided,
                   self._ch_marks, self._un_marks, self._enclosed, self._drawn, self._hit_marks,
                   self._confirmed)
-        return sum(a.nbytes for a in arrays) + self._hits.nbytes + self._ws.nbytes()
+        return sum(a.nbytes for a in arrays) + self._hits.nbytes + self._ws.nbytes() + \
+            self._faces.nbytes
 
     # --- stop and resume ----------------------------------------------------------------------
     def save(self, path) -> None:
@@ -433,7 +448,9 @@ class MapUpdater:
         renamed, so a crash never leaves a half-written state."""
         path = Path(path)
         arrays = {"reference": self._ref, "hist": self._hist, "hits": self._hits.dense(),
-                  "seen": self._seen}
+                  "seen": self._seen, "face_hits": self._faces.hits,
+                  "face_passes": self._faces.passes, "face_behind": self._faces.behind,
+                  "face_now": self._faces.now, "face_confirmed": self._faces.confirmed}
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
                 "gate": self._gate.state(), "counts": self._counts,
@@ -509,6 +526,10 @@ class MapUpdater:
                 # states saved before the growth into the unknown have no hit buffers
                 hits = z["hits"] if "hits" in z.files else None
                 seen = z["seen"] if "seen" in z.files else None
+                # states saved before the faces rule have no face counts
+                keys = ("face_hits", "face_passes", "face_behind", "face_now", "face_confirmed")
+                faces = FaceCounts(*(z[k] for k in keys)) if set(keys) <= set(z.files) \
+                    else None
         except FileInputError as e:
             raise UpdaterError(str(e)) from None
         # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
@@ -525,13 +546,21 @@ class MapUpdater:
         if missing:
             raise UpdaterError(f"{path}: state lacks {', '.join(missing)}")
         saved_state.check_checksums(path, meta.get("checksums"), {
-            "reference": ref, "hist": hist, "hits": hits, "seen": seen})
+            "reference": ref, "hist": hist, "hits": hits, "seen": seen,
+            "face_hits": None if faces is None else faces.hits,
+            "face_passes": None if faces is None else faces.passes,
+            "face_behind": None if faces is None else faces.behind,
+            "face_now": None if faces is None else faces.now,
+            "face_confirmed": None if faces is None else faces.confirmed})
         config = UpdaterConfig.from_dict(meta["config"], source=str(path))
         try:
             grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))
         except (GridError, TypeError, ValueError) as e:
             raise UpdaterError(f"{path}: the saved reference map is not usable: {e}") from None
-        updater = cls(grid, config)
+        try:
+            updater = cls(grid, config, faces=faces)
+        except UpdaterError as e:
+            raise UpdaterError(f"{path}: {e}") from None
         packed = got == STATE_FORMAT and steps.count_shift(config) > 0
         updater._restore_buffers(path, hist, hits, seen, packed)
         saved_state.check_flags_counted(path, updater._hist.reshape(-1),

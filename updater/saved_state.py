@@ -21,7 +21,10 @@ from .config import UpdaterError
 
 # what each saved array is, for the messages
 ARRAYS = {"reference": "reference map", "hist": "buffers", "hits": "hit buffers",
-          "seen": "flag counts"}
+          "seen": "flag counts", "face_hits": "face hit counts",
+          "face_passes": "face crossing counts", "face_behind": "face behind counts",
+          "face_now": "face hits of the session",
+          "face_confirmed": "faces the last session would have moved"}
 _BLOCK = 1 << 20           # cells per block of the flag check
 
 

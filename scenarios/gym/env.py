@@ -270,8 +270,8 @@ class WarehouseMapUpdateEnv(gym.Env):
         self.session = UpdateSession(scn, i, self.world, reference, initial,
                                      seeds[i]["localizer"], self._run_options.updater_config,
                                      self._run_options.localizer_config,
-                                     pose_check=self._run_options.pose_check,
-                                     pose_check_config=self._run_options.pose_check_config,
+                                     pose_check=self._run_options.pose_check and (
+                                         self._run_options.pose_check_config or True),
                                      method=self.method)
         self._seed = episode_seed
         self._scans = [self.world.exact_scan(k) for k in range(len(scn.robot.lidars))]

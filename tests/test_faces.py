@@ -1,0 +1,260 @@
+"""The faces rule (``UpdaterConfig.move_faces``, updater/_faces.py): a face of M a few cells off
+the world's is moved to where the scans see it; walls seen from far or grazed stay."""
+
+import math
+
+import numpy as np
+import pytest
+
+import synthetic_room as world
+from gridmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, Pose2D
+from synthetic_room import Rect
+from updater import FaceCounts, MapUpdater, UpdaterConfig, UpdaterError
+from updater.steps import kernels
+
+# a box whose face M has 0.1 m (two cells) from where it stands
+OLD = Rect(7.0125, 3.0125, 7.6125, 3.6125)
+NEW = Rect(7.1125, 3.1125, 7.7125, 3.7125)
+
+
+def _config(**keys):
+    """The robot profile with the rule acting in the session itself (face_sessions 1)."""
+    return UpdaterConfig.profile("robot", {"move_faces": True, "face_sessions": 1, **keys})
+
+
+def _walls() -> np.ndarray:
+    walls = np.zeros(world.rasterise(world.room_walls()).shape, bool)
+    for w in world.room_walls():
+        walls |= world.cells_of(w)
+    return walls
+
+
+def _drive(ref, shapes, config, faces=None, seed=1, seconds=40.0, **drive):
+    up = MapUpdater(ref, config, faces=faces)
+    for true, noisy, t in world.Drive(seconds=seconds, seed=seed, **drive).steps():
+        up.process(world.full_scan(shapes, true, t), noisy, odometry=true)
+    return up
+
+
+# --- the counts against a reference written from the rule's words -----------------------------
+def _reference_counts(points, sensor, band, min_sine, shape):
+    """Hits: the cell each valid hit lies in, once per scan. Passes: for a beam whose hit and
+    its neighbours' two beams away are valid and lie within 8 cells of each other, and which
+    meets the line through those neighbours at a sine of ``min_sine`` or more, the cells of
+    the points 1/4, 2/4, ... ``band`` cells short of its hit along the beam (before the
+    sensor), but for its own hit cell and any cell a beam of the scan ends in or stands
+    behind; once per scan. Behind: the cells of the points 1/4 ... ``band`` cells past a valid
+    hit along its beam, but for its own hit cell and the hit cells; once per scan."""
+    height, width = shape
+    hits, passes = np.zeros(shape, int), np.zeros(shape, int)
+    hit_cells = set()
+    for x, y in points:
+        if not math.isnan(x) and 0 <= int(math.floor(x)) < width \
+                and 0 <= int(math.floor(y)) < height:
+            hit_cells.add((int(math.floor(y)), int(math.floor(x))))
+    for r, c in hit_cells:
+        hits[r, c] += 1
+    behind_cells = set()
+    for x, y in points:
+        d = np.array([x - sensor[0], y - sensor[1]])
+        if math.isnan(x) or np.linalg.norm(d) == 0:
+            continue
+        u = d / np.linalg.norm(d)
+        own = (int(math.floor(y)), int(math.floor(x)))
+        for k in range(1, 4 * band + 1):
+            cell = (int(math.floor(y + k / 4 * u[1])), int(math.floor(x + k / 4 * u[0])))
+            if cell != own and 0 <= cell[0] < height and 0 <= cell[1] < width:
+                behind_cells.add(cell)
+    behind = np.zeros(shape, int)
+    for r, c in behind_cells - hit_cells:
+        behind[r, c] += 1
+    crossed = set()
+    for i in range(2, len(points) - 2):
+        (x, y), (xa, ya), (xb, yb) = points[i], points[i - 2], points[i + 2]
+        if any(math.isnan(v) for v in (x, xa, xb)):
+            continue
+        t = np.array([xb - xa, yb - ya])
+        d = np.array([x - sensor[0], y - sensor[1]])
+        if not 0 < np.linalg.norm(t) <= 8 or np.linalg.norm(d) == 0:
+            continue
+        u = d / np.linalg.norm(d)
+        if abs(u[0] * t[1] - u[1] * t[0]) / np.linalg.norm(t) < min_sine:
+            continue
+        own = (int(math.floor(y)), int(math.floor(x)))
+        for k in range(1, 4 * band + 1):
+            s = k / 4
+            if s >= np.linalg.norm(d):
+                break
+            cell = (int(math.floor(y - s * u[1])), int(math.floor(x - s * u[0])))
+            if cell != own and 0 <= cell[0] < height and 0 <= cell[1] < width:
+                crossed.add(cell)
+    for r, c in crossed - hit_cells - behind_cells:
+        passes[r, c] += 1
+    return hits, passes, behind
+
+
+def test_counts_follow_the_rule_as_written():
+    rng = np.random.default_rng(4)
+    shape = (60, 80)
+    sensor = np.array([40.3, 30.7, 0.0])
+    # beams onto a wall (steep), along a wall (grazing), scattered, and a few invalid ones
+    angles = np.linspace(-2.5, 2.5, 200)
+    ranges = np.where(np.abs(np.cos(angles)) > 0.2, 25.0 / np.maximum(np.abs(np.cos(angles)),
+                                                                      1e-9), 30.0)
+    ranges = np.minimum(ranges, 35.0) + rng.normal(0, 0.4, angles.size)
+    points = np.column_stack([sensor[0] + ranges * np.cos(angles),
+                              sensor[1] + ranges * np.sin(angles)])
+    points[rng.choice(angles.size, 12, replace=False)] = np.nan
+    for band, min_sine in ((4, 0.5), (2, 0.0), (6, 0.9)):
+        hits, passes, behind = (np.zeros(shape, np.uint8) for _ in range(3))
+        marks = np.zeros((shape[0] * shape[1] + 7) // 8, np.uint8)
+        now = marks.copy()
+        listed = np.zeros(points.shape[0] * (8 * band + 1), np.int64)
+        for _ in range(2):          # two scans: every count twice
+            kernels().count_faces(points, sensor, band, min_sine, hits, passes, behind, marks,
+                                  listed, now)
+        want = _reference_counts(points, sensor, band, min_sine, shape)
+        assert not marks.any()
+        now_cells = np.unpackbits(now, bitorder="little")[:hits.size].reshape(shape)
+        assert np.array_equal(now_cells.astype(bool), want[0] > 0)
+        for got, expected in zip((hits, passes, behind), want):
+            assert np.array_equal(got, 2 * expected), band
+            assert expected.sum() > 50
+
+
+def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
+    """The output rule on hand-made counts, cell by cell."""
+    ref = np.full((12, 12), FREE, np.int8)
+    ref[:, 3] = OCCUPIED          # a face
+    ref[11, 11] = UNKNOWN
+    hits, passes, behind = (np.zeros(ref.shape, np.uint8) for _ in range(3))
+    passes[2, 3], hits[2, 3] = 10, 1          # crossed, hardly hit: freed
+    passes[3, 3], hits[3, 3] = 10, 2          # hit a fifth of that: stays
+    passes[1, 3], behind[1, 3] = 10, 2        # stood behind hits a fifth of that: stays
+    passes[4, 3] = 4                          # crossed too few times: stays
+    hits[2, 5], passes[2, 5] = 6, 2           # two cells from the face, hit: drawn
+    hits[3, 5], passes[3, 5] = 6, 3           # crossed more than a third: not drawn
+    hits[4, 4] = 9                            # one cell from the face: left to the map
+    hits[5, 9] = 9                            # six cells from it: the paper's new obstacle
+    hits[11, 11] = 9                          # unknown, far from the face: left
+    hits[6, 7] = 9                            # four cells from it, unknown: drawn
+    ref[6, 7] = UNKNOWN
+    hits[7, 6] = 9                            # three cells from it, hit in earlier sessions only
+    now = np.zeros(ref.size, np.uint8)
+    now[np.flatnonzero(hits)] = 1
+    now[7 * 12 + 6] = 0
+    now = np.packbits(now, bitorder="little")
+    out = ref.copy()
+    candidates = np.full_like(now, 0xFF)
+    freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind), now, now * 0,
+                                        candidates, 4, 5, 0.1, 5, 0.34, False)
+    assert (freed, drawn) == (1, 2)
+    changed = {(int(r), int(c)): int(out[r, c]) for r, c in zip(*np.nonzero(out != ref))}
+    assert changed == {(2, 3): FREE, (2, 5): OCCUPIED, (6, 7): OCCUPIED}
+    bits = np.unpackbits(candidates, bitorder="little")[:ref.size].reshape(ref.shape)
+    assert {(int(r), int(c)) for r, c in zip(*np.nonzero(bits))} == set(changed)
+    # confirmed by the session before: only the cells it would have moved too
+    confirmed = np.zeros(ref.size, np.uint8)
+    confirmed[2 * 12 + 5] = 1
+    confirmed[9 * 12 + 9] = 1                 # not a candidate now: stays
+    out = ref.copy()
+    assert kernels().move_faces(ref, out, (hits, passes, behind), now,
+                                np.packbits(confirmed, bitorder="little"), candidates, 4, 5,
+                                0.1, 5, 0.34, True) == (0, 1)
+    assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
+
+
+# --- in a room ------------------------------------------------------------------------------
+def test_a_face_two_cells_off_is_moved_to_where_the_scans_see_it():
+    ref = world.rasterise(world.room_walls(), hollow=[OLD])
+    truth = world.rasterise(world.room_walls(), hollow=[NEW]).data
+    near_new = world.dilate(truth == OCCUPIED, 1)
+    # the west faces, which the drive sees square on from the west half of its circle (the
+    # south ones it sees at 17 degrees or less, as rays that graze them)
+    west_old, west_new = np.zeros(truth.shape, bool), np.zeros(truth.shape, bool)
+    west_old[:, int(OLD.x0 / world.RES)] = True
+    west_new[:, int(NEW.x0 / world.RES)] = True
+    old_face = (ref.data == OCCUPIED) & world.cells_of(OLD) & west_old & ~near_new
+    new_face = (truth == OCCUPIED) & west_new & ~world.dilate(ref.data == OCCUPIED, 1)
+    walls = _walls()
+    shapes = world.room_walls() + [NEW]
+    out = {}
+    for on in (False, True):
+        data = _drive(ref, shapes, _config(move_faces=on)).updated_map().data
+        out[on] = {"old_freed": float((data[old_face] == FREE).mean()),
+                   "new_drawn": float(world.dilate(data == OCCUPIED, 1)[new_face].mean()),
+                   "false": int(((data == OCCUPIED) & (ref.data != OCCUPIED) & ~near_new).sum()),
+                   "walls_freed": int(((data == FREE) & walls).sum())}
+    assert old_face.sum() >= 10 and new_face.sum() >= 10
+    assert out[True]["old_freed"] >= out[False]["old_freed"] + 0.5, out
+    assert out[True]["old_freed"] >= 0.5 and out[True]["new_drawn"] >= 0.8, out
+    assert out[True]["false"] <= 2 and out[True]["walls_freed"] == 0, out
+
+
+@pytest.mark.parametrize("radius, seed", [(4.4, 1), (4.7, 2), (1.5, 3)])
+def test_walls_seen_from_near_far_or_grazed_stay_where_they_are(radius, seed):
+    """Nothing moved: M is the world. Circling 0.3-1.1 m from the walls (rays graze them) or
+    4 m away, with 2 cm / 1 deg of pose noise, the rule moves nothing: no wall cell freed, no
+    cell drawn off a true surface."""
+    ref = world.rasterise(world.room_walls())
+    up = _drive(ref, world.room_walls(), _config(), seed=seed, radius=radius, seconds=60.0)
+    off = _drive(ref, world.room_walls(), _config(move_faces=False), seed=seed, radius=radius,
+                 seconds=60.0).updated_map().data
+    data = up.updated_map().data
+    assert not ((data == FREE) & _walls()).any()
+    assert not ((data != off) & ~world.dilate(ref.data == OCCUPIED, 1)).any()
+    assert up.carried_faces().passes.max() > 0      # the rule did look
+
+
+def test_counts_go_on_into_the_next_session_halved():
+    ref = world.rasterise(world.room_walls(), hollow=[OLD])
+    shapes = world.room_walls() + [NEW]
+    first = _drive(ref, shapes, _config(), seconds=10.0)
+    carried = first.carried_faces()
+    assert np.array_equal(carried.hits, first._faces.hits >> 1)
+    assert np.array_equal(carried.passes, first._faces.passes >> 1)
+    assert np.array_equal(carried.behind, first._faces.behind >> 1)
+    assert carried.passes.max() >= 2
+    nxt = MapUpdater(first.updated_map(), _config(), faces=carried)
+    assert np.array_equal(nxt.carried_faces().passes, carried.passes >> 1)
+    # a session of ten seconds moves less than one with the last one's counts behind it
+    again = _drive(ref, shapes, _config(), faces=carried, seconds=10.0, seed=2)
+    alone = _drive(ref, shapes, _config(), seconds=10.0, seed=2)
+    moved = [int((u.updated_map().data != ref.data).sum()) for u in (alone, again)]
+    assert moved[1] > moved[0], moved
+    # with face_sessions 2, the first session moves nothing, the second what both saw
+    two = _config(face_sessions=2)
+    first2 = _drive(ref, shapes, two, seconds=20.0)
+    assert np.array_equal(first2.updated_map().data,
+                          _drive(ref, shapes, _config(move_faces=False),
+                                 seconds=20.0).updated_map().data)
+    second2 = _drive(first2.updated_map(), shapes, two, faces=first2.carried_faces(),
+                     seconds=20.0, seed=2)
+    moved = second2.updated_map().data != first2.updated_map().data
+    assert moved.sum() >= 10
+    # with the rule off nothing is kept
+    assert MapUpdater(ref, _config(move_faces=False), faces=carried).carried_faces().hits.size \
+        == 0
+
+
+def test_counts_of_another_map_are_refused():
+    ref = world.rasterise(world.room_walls())
+    wrong = FaceCounts(*(np.zeros((5, 5), np.uint8) for _ in range(3)))
+    with pytest.raises(UpdaterError, match=r"face counts' hits do not fit the map"):
+        MapUpdater(ref, _config(), faces=wrong)
+    grid = OccupancyGrid(np.zeros(ref.shape, np.int8), 0.05)
+    bad = FaceCounts(np.zeros(ref.shape, np.uint16), np.zeros(ref.shape, np.uint8),
+                     np.zeros(ref.shape, np.uint8))
+    with pytest.raises(UpdaterError, match="uint8 expected"):
+        MapUpdater(grid, _config(), faces=bad)
+
+
+def test_a_saved_state_keeps_the_counts(tmp_path):
+    ref = world.rasterise(world.room_walls(), hollow=[OLD])
+    up = _drive(ref, world.room_walls() + [NEW], _config(), seconds=10.0)
+    up.save(tmp_path / "s.npz")
+    back = MapUpdater.load(tmp_path / "s.npz")
+    assert np.array_equal(back._faces.hits, up._faces.hits)
+    assert np.array_equal(back._faces.passes, up._faces.passes)
+    assert np.array_equal(back._faces.behind, up._faces.behind)
+    assert np.array_equal(back.updated_map().data, up.updated_map().data)

@@ -1,0 +1,190 @@
+"""Faces a few cells off (not in the paper; docs/algorithm.md, "Faces a few cells off").
+
+A face of M two or three cells from the world's pairs with it within D(r), so the paper's
+rules read the beams that hit the world's face as unchanged and leave M's copy standing;
+and a face drawn in pieces keeps its gaps, since the hits in them fall within tol(r) of the
+pieces. Neither rule looks at where, within the pairing distance, the hits land. This one
+does: over the processed scans it counts, per cell, the scans whose beams end in the cell
+(``hits``) and the scans whose beams cross it within the last ``band`` cells before their
+hit, meeting the surface they hit at a steep enough angle (``passes``), each scan at most
+once per cell. At the output, an occupied cell of M that beams keep crossing and almost
+never end in is freed, and a free or unknown cell of M near its surfaces that beams keep ending in and
+almost never cross is drawn: the face moves to where the scans see it.
+
+Only beams that meet the surface at ``min_sine`` or more count as crossing: a ray grazing a
+face under a pose a few centimetres off crosses its cells in most scans while the face
+stands. Counts saturate at 255.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from gridmap.cells import FREE, OCCUPIED
+
+from ._shared import bit_get, test_and_set
+
+SATURATED = 255
+STEPS_PER_CELL = 4          # samples per cell along a beam's last ``band`` cells
+
+
+@njit(cache=True)
+def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks, listed, now):
+    """One processed scan into the counts. ``hit_points`` (n, 2) [grid units], NaN for an
+    invalid beam; ``sensor`` (gx, gy, yaw); ``band`` [cells]; ``hits``, ``passes``,
+    ``behind``: uint8 (H, W); ``marks``: a bit plane, all clear (cleared again before
+    returning); ``listed``: int64 room for n * (2 * STEPS_PER_CELL * band + 1) cells.
+    ``behind`` counts the cells within ``band`` cells past a beam's hit, along the beam,
+    whatever the angle: a surface stands in front of them. Each cell counts once per scan, as
+    the first of hit, behind and crossed that it is. ``now``: a bit plane of the cells hit in
+    this session (set here, never cleared: the session's own). The surface a beam meets is the line through the
+    hits of beams i - 2 and i + 2 (when both are valid and within 8 cells of each other).
+    Returns the count of cells counted."""
+    n = hit_points.shape[0]
+    height, width = hits.shape
+    hit_flat, pass_flat, behind_flat = hits.reshape(-1), passes.reshape(-1), behind.reshape(-1)
+    n_listed = 0
+    for i in range(n):
+        x, y = hit_points[i, 0], hit_points[i, 1]
+        if math.isnan(x) or math.isnan(y):
+            continue
+        col, row = int(math.floor(x)), int(math.floor(y))
+        if 0 <= col < width and 0 <= row < height:
+            idx = row * width + col
+            test_and_set(now, idx)
+            if test_and_set(marks, idx):
+                listed[n_listed] = idx
+                n_listed += 1
+                if hit_flat[idx] < SATURATED:
+                    hit_flat[idx] += 1
+    for i in range(n):
+        x, y = hit_points[i, 0], hit_points[i, 1]
+        if math.isnan(x) or math.isnan(y):
+            continue
+        dx, dy = x - sensor[0], y - sensor[1]
+        d = math.hypot(dx, dy)
+        if d <= 0.0:
+            continue
+        ux, uy = dx / d, dy / d
+        hit_col, hit_row = int(math.floor(x)), int(math.floor(y))
+        for k in range(1, STEPS_PER_CELL * band + 1):
+            s = k / STEPS_PER_CELL
+            col, row = int(math.floor(x + s * ux)), int(math.floor(y + s * uy))
+            if (col == hit_col and row == hit_row) or not (0 <= col < width
+                                                           and 0 <= row < height):
+                continue
+            idx = row * width + col
+            if test_and_set(marks, idx):
+                listed[n_listed] = idx
+                n_listed += 1
+                if behind_flat[idx] < SATURATED:
+                    behind_flat[idx] += 1
+    for i in range(2, n - 2):
+        x, y = hit_points[i, 0], hit_points[i, 1]
+        xa, ya = hit_points[i - 2, 0], hit_points[i - 2, 1]
+        xb, yb = hit_points[i + 2, 0], hit_points[i + 2, 1]
+        if math.isnan(x) or math.isnan(xa) or math.isnan(xb):
+            continue
+        tx, ty = xb - xa, yb - ya
+        tn = math.hypot(tx, ty)
+        dx, dy = x - sensor[0], y - sensor[1]
+        d = math.hypot(dx, dy)
+        if tn <= 0.0 or tn > 8.0 or d <= 0.0:
+            continue
+        ux, uy = dx / d, dy / d
+        if abs(ux * ty - uy * tx) / tn < min_sine:
+            continue
+        hit_col, hit_row = int(math.floor(x)), int(math.floor(y))
+        for k in range(1, STEPS_PER_CELL * band + 1):
+            s = k / STEPS_PER_CELL
+            if s >= d:
+                break
+            col, row = int(math.floor(x - s * ux)), int(math.floor(y - s * uy))
+            if (col == hit_col and row == hit_row) or not (0 <= col < width
+                                                           and 0 <= row < height):
+                continue
+            idx = row * width + col
+            if test_and_set(marks, idx):
+                listed[n_listed] = idx
+                n_listed += 1
+                if pass_flat[idx] < SATURATED:
+                    pass_flat[idx] += 1
+    for k in range(n_listed):
+        idx = listed[k]
+        marks[idx >> 3] = marks[idx >> 3] & ~(1 << (idx & 7))
+    return n_listed
+
+
+@njit(cache=True)
+def move_faces(ref, out, counts, now, confirmed, candidates, band, min_passes, free_ratio,
+               min_hits, draw_ratio, confirm):
+    """The output (``out``, int8 (H, W), M with the other rules' changes) with the faces moved.
+    ``counts``: (hits, passes, behind), uint8 (H, W) each. The candidates: an occupied cell
+    of M (``ref``) that ``out`` keeps occupied, crossed by ``min_passes`` scans or more, and
+    ended in or stood behind a hit by at most ``free_ratio`` of that many (the back of a
+    wall, crossed by a beam a pose error put behind it, stands behind the face that the other
+    beams hit), to be freed; a free or unknown cell of M that ``out`` keeps so (behind a face
+    of M the world's face stands in M's unknown), ended in by ``min_hits`` scans or more and
+    crossed by at most ``draw_ratio`` of that many, whose nearest occupied cell of M lies 2
+    to ``band`` cells away (Chebyshev; one cell away it is the same face, within the
+    scoring's and the map's own slack, and further than ``band`` it is the paper's new
+    obstacle), and which a beam of this session ended in (``now``: the counts carried from
+    earlier sessions would otherwise draw again what stood there then), to be drawn. Each
+    candidate's bit is set in ``candidates`` (a bit plane, cleared first); with ``confirm``
+    only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
+    (cells freed, cells drawn)."""
+    hits, passes, behind = counts
+    height, width = ref.shape
+    candidates[:] = 0
+    freed = drawn = 0
+    for row in range(height):
+        for col in range(width):
+            idx = row * width + col
+            m, h, p = ref[row, col], hits[row, col], passes[row, col]
+            to = -1
+            if m == OCCUPIED and out[row, col] == OCCUPIED:
+                if p >= min_passes and h + behind[row, col] <= free_ratio * p:
+                    to = FREE
+            elif m != OCCUPIED and out[row, col] == m and h >= min_hits and \
+                    p <= draw_ratio * h and bit_get(now, idx):
+                near = _nearest_occupied(ref, row, col, band)
+                if 2 <= near <= band:
+                    to = OCCUPIED
+            if to < 0:
+                continue
+            test_and_set(candidates, idx)
+            if confirm and not bit_get(confirmed, idx):
+                continue
+            out[row, col] = to
+            if to == FREE:
+                freed += 1
+            else:
+                drawn += 1
+    return freed, drawn
+
+
+@njit(cache=True)
+def _nearest_occupied(ref, row, col, reach):
+    """Chebyshev distance [cells] from (row, col) to the nearest occupied cell of ``ref``
+    within ``reach``, or ``reach + 1`` when there is none."""
+    height, width = ref.shape
+    for ring in range(1, reach + 1):
+        for r in range(max(row - ring, 0), min(row + ring + 1, height)):
+            edge = r == row - ring or r == row + ring
+            step = 1 if edge else 2 * ring
+            c = col - ring
+            while c <= col + ring:
+                if 0 <= c < width and ref[r, c] == OCCUPIED:
+                    return ring
+                c += step
+    return reach + 1
+
+
+def decayed(counts: np.ndarray) -> np.ndarray:
+    """The counts a new session starts from: halved, so a scan of the last session weighs half
+    one of this session, and one of ten sessions ago a thousandth."""
+    return counts >> np.uint8(1)
+
+
+__all__ = ["SATURATED", "count_faces", "decayed", "move_faces"]

@@ -1,0 +1,95 @@
+"""The counts of the faces rule (``UpdaterConfig.move_faces``; the kernels are ``_faces``): per
+cell, the processed scans whose beams ended in it, those whose beams crossed it just before
+their hit, and those whose beams ended just before it. They belong to the world's cells, not to a map, so they go on from one session to the
+next (``MapUpdater.carried_faces``, ``MapUpdater(..., faces=)``), halved at each new session:
+a face that one session sees only a few times is moved once a few sessions have seen it so.
+With ``face_sessions`` 2 a cell is moved only when the rule would have moved it at the end of
+the last session too (``confirmed``): what a single session saw, a pose a few centimetres off
+along a whole recording, moves nothing.
+Three bytes per cell with the rule on, none with it off; bounded, however many sessions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import UpdaterConfig, UpdaterError
+from .steps import kernels
+
+
+@dataclass
+class FaceCounts:
+    hits: np.ndarray       # uint8 (H, W): scans whose beams ended in the cell (saturating)
+    passes: np.ndarray     # uint8 (H, W): scans whose beams crossed it before their hit
+    behind: np.ndarray     # uint8 (H, W): scans whose beams ended just before it
+    # bit plane of the cells this session's beams ended in: the session's own, never carried
+    # (None: none yet)
+    now: np.ndarray | None = None
+    # bit plane of the cells the rule would have moved at the end of the last session (None:
+    # none): with face_sessions 2, a cell is moved only when two sessions in a row agree
+    confirmed: np.ndarray | None = None
+
+    @classmethod
+    def start(cls, shape: tuple[int, int], on: bool, carried: FaceCounts | None
+              ) -> FaceCounts:
+        """The counts a session starts from: ``carried`` (checked against the map's shape),
+        or zeros; empty with the rule off (``on`` False), whatever was carried."""
+        if not on:
+            return cls(*(np.zeros((0, 0), np.uint8) for _ in range(3)))
+        if carried is None or carried.hits.size == 0:
+            return cls(*(np.zeros(shape, np.uint8) for _ in range(3)))
+        if not isinstance(carried, FaceCounts):
+            raise UpdaterError(f"faces must be a FaceCounts, got {type(carried).__name__}")
+        for name in ("hits", "passes", "behind"):
+            a = getattr(carried, name)
+            if not isinstance(a, np.ndarray) or a.shape != tuple(shape) or a.dtype != np.uint8:
+                raise UpdaterError(f"the face counts' {name} do not fit the map: "
+                                   f"{getattr(a, 'shape', None)} {getattr(a, 'dtype', None)}, "
+                                   f"the map is {tuple(shape)}, uint8 expected")
+        return cls(carried.hits.copy(), carried.passes.copy(), carried.behind.copy(),
+                   *(None if a is None else a.copy() for a in (carried.now, carried.confirmed)))
+
+    def __post_init__(self):
+        self._scratch(self.hits.shape)
+
+    def _scratch(self, shape) -> None:
+        n = int(np.prod(shape)) if self.hits.size else 0
+        self._marks = np.zeros((n + 7) // 8, np.uint8)
+        if self.now is None or self.now.shape != self._marks.shape:
+            self.now = np.zeros((n + 7) // 8, np.uint8)
+        if self.confirmed is None or self.confirmed.shape != self._marks.shape:
+            self.confirmed = np.zeros((n + 7) // 8, np.uint8)
+        self.candidates = np.zeros((n + 7) // 8, np.uint8)
+        self._listed = np.zeros(0, np.int64)
+
+    @property
+    def nbytes(self) -> int:
+        return self.hits.nbytes + self.passes.nbytes + self.behind.nbytes + \
+            self._marks.nbytes + self.now.nbytes + self.confirmed.nbytes + \
+            self.candidates.nbytes + self._listed.nbytes
+
+    def count(self, ws, sensor: np.ndarray, cfg: UpdaterConfig) -> None:
+        """A processed scan's beams (``ws.hits``, as the classifier left them) at ``sensor``."""
+        n = ws.hits.shape[0]
+        room = n * (2 * kernels().STEPS_PER_CELL * cfg.face_band + 1)
+        if self._listed.size < room:
+            self._listed = np.zeros(room, np.int64)
+        kernels().count_faces(ws.hits, sensor, cfg.face_band, cfg.face_min_sine, self.hits,
+                              self.passes, self.behind, self._marks, self._listed, self.now)
+
+    def move(self, ref: np.ndarray, out: np.ndarray, cfg: UpdaterConfig) -> tuple[int, int]:
+        """``out`` (the output cells) with the faces moved; (cells freed, cells drawn). The
+        cells the rule would move are left in ``candidates``."""
+        return kernels().move_faces(ref, out, (self.hits, self.passes, self.behind), self.now,
+                                    self.confirmed, self.candidates, cfg.face_band,
+                                    cfg.face_min_passes, cfg.face_free_ratio,
+                                    cfg.face_min_hits, cfg.face_draw_ratio,
+                                    cfg.face_sessions > 1)
+
+    def decayed(self) -> FaceCounts:
+        """What a new session starts from: the counts halved, and the cells the rule would
+        move now (``candidates``, as the last ``move`` left them) as ``confirmed``."""
+        return FaceCounts(self.hits >> np.uint8(1), self.passes >> np.uint8(1),
+                          self.behind >> np.uint8(1), None, self.candidates.copy())

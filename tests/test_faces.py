@@ -146,8 +146,10 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     now = np.packbits(now, bitorder="little")
     out = ref.copy()
     candidates = np.full_like(now, 0xFF)
-    freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind), now, now * 0,
-                                        candidates, 4, 5, 0.1, 5, 0.34, False)
+    small = np.full_like(now, 0xFF)
+    freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind),
+                                        (now, now * 0, candidates, small), 4, 5, 0.1, 5, 0.34,
+                                        False)
     assert (freed, drawn) == (1, 2)
     changed = {(int(r), int(c)): int(out[r, c]) for r, c in zip(*np.nonzero(out != ref))}
     assert changed == {(2, 3): FREE, (2, 5): OCCUPIED, (6, 7): OCCUPIED}
@@ -158,10 +160,33 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     confirmed[2 * 12 + 5] = 1
     confirmed[9 * 12 + 9] = 1                 # not a candidate now: stays
     out = ref.copy()
-    assert kernels().move_faces(ref, out, (hits, passes, behind), now,
-                                np.packbits(confirmed, bitorder="little"), candidates, 4, 5,
-                                0.1, 5, 0.34, True) == (0, 1)
+    planes = (now, np.packbits(confirmed, bitorder="little"), candidates, small)
+    assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
+                                True) == (0, 1)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
+    # a face of a large structure (a wall, a rack) stays, and nothing is drawn beside it
+    out = ref.copy()
+    planes = (now, now * 0, candidates, small * 0)
+    assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
+                                False) == (0, 0)
+
+
+def test_small_structures_are_those_of_a_labelling():
+    from scipy import ndimage
+
+    from updater.faces import small_structure_bits
+
+    rng = np.random.default_rng(3)
+    ref = np.where(rng.random((70, 90)) < 0.3, OCCUPIED, FREE).astype(np.int8)
+    ref[10, :] = OCCUPIED                        # a long wall
+    labels, n = ndimage.label(ref == OCCUPIED, structure=np.ones((3, 3)))
+    sizes = np.bincount(labels.ravel())
+    for max_cells in (1, 5, 40):
+        want = (labels > 0) & (sizes[labels] <= max_cells)
+        bits = small_structure_bits(ref, max_cells * 0.05**2, 0.05)
+        got = np.unpackbits(bits, bitorder="little")[:ref.size].reshape(ref.shape)
+        assert np.array_equal(got.astype(bool), want), max_cells
+        assert want.any() and (~want & (ref == OCCUPIED)).any()
 
 
 # --- in a room ------------------------------------------------------------------------------

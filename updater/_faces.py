@@ -117,11 +117,14 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
 
 
 @njit(cache=True)
-def move_faces(ref, out, counts, now, confirmed, candidates, band, min_passes, free_ratio,
-               min_hits, draw_ratio, confirm):
+def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits, draw_ratio,
+               confirm):
     """The output (``out``, int8 (H, W), M with the other rules' changes) with the faces moved.
-    ``counts``: (hits, passes, behind), uint8 (H, W) each. The candidates: an occupied cell
-    of M (``ref``) that ``out`` keeps occupied, crossed by ``min_passes`` scans or more, and
+    ``counts``: (hits, passes, behind), uint8 (H, W) each; ``planes``: the bit planes (now,
+    confirmed, candidates, small). Only faces of small structures of M (``small``:
+    ``small_structures``) move: a wall's or a rack's stays where M has it, however a
+    recording's poses lie along it. The candidates: an occupied cell of M (``ref``) of a
+    small structure that ``out`` keeps occupied, crossed by ``min_passes`` scans or more, and
     ended in or stood behind a hit by at most ``free_ratio`` of that many (the back of a
     wall, crossed by a beam a pose error put behind it, stands behind the face that the other
     beams hit), to be freed; a free or unknown cell of M that ``out`` keeps so (behind a face
@@ -129,12 +132,14 @@ def move_faces(ref, out, counts, now, confirmed, candidates, band, min_passes, f
     crossed by at most ``draw_ratio`` of that many, whose nearest occupied cell of M lies 2
     to ``band`` cells away (Chebyshev; one cell away it is the same face, within the
     scoring's and the map's own slack, and further than ``band`` it is the paper's new
-    obstacle), and which a beam of this session ended in (``now``: the counts carried from
+    obstacle) and no occupied cell of M within ``band`` that is not of a small structure,
+    and which a beam of this session ended in (``now``: the counts carried from
     earlier sessions would otherwise draw again what stood there then), to be drawn. Each
     candidate's bit is set in ``candidates`` (a bit plane, cleared first); with ``confirm``
     only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
     (cells freed, cells drawn)."""
     hits, passes, behind = counts
+    now, confirmed, candidates, small = planes
     height, width = ref.shape
     candidates[:] = 0
     freed = drawn = 0
@@ -144,12 +149,13 @@ def move_faces(ref, out, counts, now, confirmed, candidates, band, min_passes, f
             m, h, p = ref[row, col], hits[row, col], passes[row, col]
             to = -1
             if m == OCCUPIED and out[row, col] == OCCUPIED:
-                if p >= min_passes and h + behind[row, col] <= free_ratio * p:
+                if p >= min_passes and h + behind[row, col] <= free_ratio * p and \
+                        bit_get(small, idx):
                     to = FREE
             elif m != OCCUPIED and out[row, col] == m and h >= min_hits and \
                     p <= draw_ratio * h and bit_get(now, idx):
-                near = _nearest_occupied(ref, row, col, band)
-                if 2 <= near <= band:
+                near, all_small = _nearest_occupied(ref, small, row, col, band)
+                if 2 <= near <= band and all_small:
                     to = OCCUPIED
             if to < 0:
                 continue
@@ -165,10 +171,12 @@ def move_faces(ref, out, counts, now, confirmed, candidates, band, min_passes, f
 
 
 @njit(cache=True)
-def _nearest_occupied(ref, row, col, reach):
+def _nearest_occupied(ref, small, row, col, reach):
     """Chebyshev distance [cells] from (row, col) to the nearest occupied cell of ``ref``
-    within ``reach``, or ``reach + 1`` when there is none."""
+    within ``reach`` (``reach + 1`` when there is none), and whether every occupied cell
+    within ``reach`` belongs to a small structure (``small``, a bit plane)."""
     height, width = ref.shape
+    nearest, all_small = reach + 1, True
     for ring in range(1, reach + 1):
         for r in range(max(row - ring, 0), min(row + ring + 1, height)):
             edge = r == row - ring or r == row + ring
@@ -176,9 +184,45 @@ def _nearest_occupied(ref, row, col, reach):
             c = col - ring
             while c <= col + ring:
                 if 0 <= c < width and ref[r, c] == OCCUPIED:
-                    return ring
+                    nearest = min(nearest, ring)
+                    if not bit_get(small, r * width + c):
+                        all_small = False
                 c += step
-    return reach + 1
+    return nearest, all_small
+
+
+@njit(cache=True)
+def small_structures(ref, max_cells, small, seen, stack, members):
+    """Set in ``small`` (a bit plane) the occupied cells of ``ref`` whose 8-connected
+    structure of occupied cells has at most ``max_cells`` cells: objects, not walls or racks.
+    ``seen``: a clear bit plane; ``stack``: int64 room for every occupied cell; ``members``:
+    int64 room for ``max_cells + 1``. Returns the count of small structures."""
+    height, width = ref.shape
+    flat = ref.reshape(-1)
+    found = 0
+    for start in range(flat.size):
+        if flat[start] != OCCUPIED or not test_and_set(seen, start):
+            continue
+        stack[0] = start
+        top, n = 1, 0
+        while top > 0:
+            top -= 1
+            idx = stack[top]
+            if n <= max_cells:
+                members[n] = idx
+            n += 1
+            row, col = idx // width, idx % width
+            for r in range(max(row - 1, 0), min(row + 2, height)):
+                for c in range(max(col - 1, 0), min(col + 2, width)):
+                    j = r * width + c
+                    if flat[j] == OCCUPIED and test_and_set(seen, j):
+                        stack[top] = j
+                        top += 1
+        if n <= max_cells:
+            found += 1
+            for k in range(n):
+                test_and_set(small, members[k])
+    return found
 
 
 def decayed(counts: np.ndarray) -> np.ndarray:
@@ -187,4 +231,4 @@ def decayed(counts: np.ndarray) -> np.ndarray:
     return counts >> np.uint8(1)
 
 
-__all__ = ["SATURATED", "count_faces", "decayed", "move_faces"]
+__all__ = ["SATURATED", "count_faces", "decayed", "move_faces", "small_structures"]

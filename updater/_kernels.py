@@ -37,7 +37,7 @@ from ._classify import (MIN_INCIDENCE_SINE, beam_directions,  # noqa: F401
                         run_classifier, run_filter, scan_is_lost, skip_across, valid_ranges)
 from ._decide import (clear_neighbourhoods, decide, decide_all, decide_cell,  # noqa: F401
                       neighbourhood, push_and_decide, same_state)
-from ._faces import STEPS_PER_CELL, count_faces, move_faces  # noqa: F401
+from ._faces import STEPS_PER_CELL, count_faces, move_faces, small_structures  # noqa: F401
 from ._flags import (disc_is_free, flag_gaps, flag_hit_surfaces,  # noqa: F401
                      flag_listed_unchanged, flag_new_obstacles, flag_occupied_unchanged,
                      flag_scan, guard_needed, list_unknown_hits, mark_seen_surfaces,

@@ -47,6 +47,7 @@ BOUNDS = {
     "last_check_max_area": (0.0, 10_000.0), "face_band": (2, 20), "face_min_sine": (0.0, 1.0),
     "face_min_passes": (1, 255), "face_free_ratio": (0.0, 1.0), "face_min_hits": (1, 255),
     "face_draw_ratio": (0.0, 1.0), "face_sessions": (1, 2),
+    "face_max_area": (0.0, 10_000.0),
 }
 
 
@@ -234,6 +235,8 @@ class UpdaterConfig:
     face_min_hits: int = 5                   # [scans]
     face_draw_ratio: float = 0.34
     face_sessions: int = 1                   # 2: a cell moves only when two sessions agree
+    face_max_area: float = 1.0               # [m^2] only faces of structures of M this small
+                                             # move (objects; not walls or racks)
     # --- Last check ---------------------------------------------------------------------------
     last_check: bool = True
     last_check_max_area: float = 25.0        # [m^2] largest enclosed unknown region closed

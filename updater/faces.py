@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gridmap.cells import OCCUPIED
+
 from .config import UpdaterConfig, UpdaterError
 from .steps import kernels
 
@@ -79,12 +81,15 @@ class FaceCounts:
         kernels().count_faces(ws.hits, sensor, cfg.face_band, cfg.face_min_sine, self.hits,
                               self.passes, self.behind, self._marks, self._listed, self.now)
 
-    def move(self, ref: np.ndarray, out: np.ndarray, cfg: UpdaterConfig) -> tuple[int, int]:
+    def move(self, ref: np.ndarray, out: np.ndarray, cfg: UpdaterConfig,
+             res: float) -> tuple[int, int]:
         """``out`` (the output cells) with the faces moved; (cells freed, cells drawn). The
         cells the rule would move are left in ``candidates``."""
-        return kernels().move_faces(ref, out, (self.hits, self.passes, self.behind), self.now,
-                                    self.confirmed, self.candidates, cfg.face_band,
-                                    cfg.face_min_passes, cfg.face_free_ratio,
+        if getattr(self, "_small", None) is None:       # once per reference map
+            self._small = small_structure_bits(ref, cfg.face_max_area, res)
+        planes = (self.now, self.confirmed, self.candidates, self._small)
+        return kernels().move_faces(ref, out, (self.hits, self.passes, self.behind), planes,
+                                    cfg.face_band, cfg.face_min_passes, cfg.face_free_ratio,
                                     cfg.face_min_hits, cfg.face_draw_ratio,
                                     cfg.face_sessions > 1)
 
@@ -93,3 +98,15 @@ class FaceCounts:
         move now (``candidates``, as the last ``move`` left them) as ``confirmed``."""
         return FaceCounts(self.hits >> np.uint8(1), self.passes >> np.uint8(1),
                           self.behind >> np.uint8(1), None, self.candidates.copy())
+
+
+def small_structure_bits(ref: np.ndarray, max_area: float, res: float) -> np.ndarray:
+    """A bit plane of the occupied cells of ``ref`` in 8-connected structures of at most
+    ``max_area`` [m^2] of cells (``_faces.small_structures``)."""
+    max_cells = int(np.floor(max_area / res**2 + 1e-9))
+    n_bytes = (ref.size + 7) // 8
+    small, seen = np.zeros(n_bytes, np.uint8), np.zeros(n_bytes, np.uint8)
+    stack = np.zeros(max(1, int(np.count_nonzero(ref == OCCUPIED))), np.int64)
+    kernels().small_structures(ref, max_cells, small, seen, stack,
+                               np.zeros(max_cells + 1, np.int64))
+    return small

@@ -350,7 +350,7 @@ class MapUpdater:
                                         self.config.last_check, self._drawn, spare,
                                         steps.buffer_mask(self.config))
         if self.config.move_faces:
-            self._faces.move(self._ref, cells, self.config)
+            self._faces.move(self._ref, cells, self.config, self._res)
         return OccupancyGrid(cells, self._res, self._origin)
 
     def carried_faces(self) -> FaceCounts:

@@ -353,7 +353,7 @@ def print_tables(runs: list[dict]) -> None:
     print("| method | runs | recall | trend | first / last fifth | precision | G freed "
           "| ghosts median | OPDF gap last fifth |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for method in METHODS:
+    for method in dict.fromkeys(r["method"] for r in runs):
         ss = [summarise(r) for r in runs if r["method"] == method]
         if not ss:
             continue
@@ -371,8 +371,10 @@ def figure(runs: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharex=True)
-    colours = dict(zip(METHODS, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
-    for method in METHODS:
+    labels = list(dict.fromkeys(r["method"] for r in runs))
+    colours = dict(zip(labels, ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple",
+                                "tab:brown", "tab:grey")))
+    for method in labels:
         mine = [r for r in runs if r["method"] == method]
         if not mine:
             continue

@@ -18,8 +18,10 @@ NEW = Rect(7.1125, 3.1125, 7.7125, 3.7125)
 
 
 def _config(**keys):
-    """The robot profile with the rule acting in the session itself (face_sessions 1)."""
-    return UpdaterConfig.profile("robot", {"move_faces": True, "face_sessions": 1, **keys})
+    """The robot profile with the rule acting in the session itself (face_sessions 1), on the
+    drive's poses as given (no pose check to place them)."""
+    return UpdaterConfig.profile("robot", {"move_faces": True, "face_sessions": 1,
+                                           "face_refined_only": False, **keys})
 
 
 def _walls() -> np.ndarray:
@@ -283,3 +285,22 @@ def test_a_saved_state_keeps_the_counts(tmp_path):
     assert np.array_equal(back._faces.passes, up._faces.passes)
     assert np.array_equal(back._faces.behind, up._faces.behind)
     assert np.array_equal(back.updated_map().data, up.updated_map().data)
+
+
+def test_only_scans_the_pose_check_placed_count_by_default():
+    """With face_refined_only (the default), a scan counts when the pose check refined its
+    pose: poses taken as given (a recording's, a node's tf) count nothing."""
+    from gridmap import PoseVerdict
+
+    ref = world.rasterise(world.room_walls(), hollow=[OLD])
+    shapes = world.room_walls() + [NEW]
+    cfg = _config(face_refined_only=True)
+    given = MapUpdater(ref, cfg)
+    placed = MapUpdater(ref, cfg)
+    for true, noisy, t in world.Drive(seconds=10.0, seed=1).steps():
+        scan = world.full_scan(shapes, true, t)
+        given.process(scan, noisy, odometry=true, pose_check=PoseVerdict.accepted)
+        placed.process(scan, noisy, odometry=true,
+                       pose_check=lambda: PoseVerdict.refined(noisy))
+    assert given.carried_faces().hits.max() == 0
+    assert placed.carried_faces().hits.max() > 0

@@ -172,6 +172,7 @@ class MapUpdater:
             self._enclosed, _ = steps.enclosed_unknown(self._ref, max_cells)
         self._cells = MapCells(self._ref, self._clear, self._enclosed)
         self._faces = FaceCounts.start(self._ref.shape, config.move_faces, faces)
+        self._refined = False       # the pose check placed the last scan (Verdict.REFINED)
         self._state: Buffers | None = None      # the buffers as the kernels take them
         self._n_changed = 0
         # with gate_confirm_once: the cells held-back scans confirmed since the last processed
@@ -225,7 +226,7 @@ class MapUpdater:
                               changed_cells=self._n_changed, verdicts=ws.verdict.copy(),
                               sensor_pose=placed)
         n_ch, n_new, n_un, d_changed, d_drawn = flags
-        if cfg.move_faces:
+        if cfg.move_faces and (self._refined or not cfg.face_refined_only):
             self._faces.count(ws, sensor, cfg)
         self._n_changed += d_changed
         self._n_drawn += d_drawn
@@ -291,6 +292,7 @@ class MapUpdater:
         or the one the pose check refined it to; (pose or None, ..., status, reason) for one to
         skip."""
         placed, refused = sensor_pose, None
+        self._refined = False
         sensor = steps.to_grid(placed, self._origin, self._res)
         if pose_check is not None and self._on_map(sensor):
             verdict = pose_check()
@@ -303,6 +305,7 @@ class MapUpdater:
                                        f"{verdict.sensor_pose}")
                 placed = verdict.sensor_pose
                 sensor = steps.to_grid(placed, self._origin, self._res)
+                self._refined = True        # placed where the scan fits M (the faces rule)
             if verdict.is_refused:
                 refused = verdict.reason
         if not self._on_map(sensor):

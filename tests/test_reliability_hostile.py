@@ -187,6 +187,27 @@ def test_update_refuses_outputs_that_are_inputs_or_each_other(small_log, tmp_pat
     refused(args, "would write", "choose another path", inputs=folder, capsys=capsys)
 
 
+def test_a_state_starts_the_next_session_on_the_map_its_session_made(small_log, tmp_path,
+                                                                      capsys):
+    """--new-session starts the next session from a state on any map of its frame (said in
+    the summary), and needs --state. (The map the state's session made, given without it,
+    is the next session too: tests/test_session_bags.py.)"""
+    m, log = small_log / "m.yaml", small_log / "run.log"
+    state = tmp_path / "s.npz"
+    assert main(["update", "--map", m, "--log", log, "--out", tmp_path / "a.yaml", "--state",
+                 state, "--no-progress"]) == 0
+    capsys.readouterr()
+    grid = load_map(tmp_path / "a.yaml")
+    grid.data[2, 2] = OCCUPIED                 # neither the map it started from nor made
+    save_map(grid, tmp_path / "other.yaml")
+    assert main(["update", "--map", tmp_path / "other.yaml", "--log", log, "--out",
+                 tmp_path / "b.yaml", "--state", state, "--new-session", "--no-progress"]) == 0
+    assert "a new session from the state" in capsys.readouterr().out
+    refused(["update", "--map", m, "--log", log, "--out", tmp_path / "c.yaml",
+             "--new-session", "--no-progress"], "--new-session", "give --state FILE too",
+            inputs=tmp_path, capsys=capsys, outputs=[tmp_path / "c.yaml"])
+
+
 def test_a_state_is_refused_for_another_map_and_another_config(small_log, tmp_path, capsys):
     m, log = small_log / "m.yaml", small_log / "run.log"
     state = tmp_path / "s.npz"

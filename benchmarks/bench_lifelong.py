@@ -386,8 +386,11 @@ def figure(runs: list[dict], path: Path) -> None:
                 series.append(y)
             n = min(len(y) for y in series)
             mean = np.nanmean(np.vstack([y[:n] for y in series]), axis=0)
-            k = 5
-            smooth = np.convolve(mean, np.ones(k) / k, mode="valid")
+            k = 9                   # a moving mean over 9 sessions
+            ok = np.isfinite(mean)      # a session with no change has no precision
+            total = np.convolve(np.where(ok, mean, 0.0), np.ones(k), mode="valid")
+            smooth = total / np.maximum(np.convolve(ok.astype(float), np.ones(k), mode="valid"),
+                                        1.0)
             ax.plot(np.arange(2, n + 2)[k // 2: k // 2 + smooth.size], smooth,
                     color=colours[method], lw=2, label=f"{method} ({len(mine)} runs)")
     axes[0].set_title("recall on the observable wrong cells")

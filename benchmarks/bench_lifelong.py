@@ -97,26 +97,19 @@ def base_scenario(layout: str, n_sessions: int) -> tuple[dict, list[dict]]:
     return {**base, "w1": data["sessions"][0]}, plans
 
 
-def _nudged(o: dict, rng) -> dict:
-    length = rng.uniform(*NUDGE)
+def _shifted(o: dict, rng, lengths: tuple[float, float], nudge: bool) -> dict:
+    """``o`` moved by a length drawn from ``lengths`` [m] in a random direction; a nudge
+    turns a box a little now and then, a move by a quarter turn or none."""
+    length = rng.uniform(*lengths)
     heading = rng.uniform(-math.pi, math.pi)
     cx, cy = np.asarray(o["center"], float) + length * np.array([math.cos(heading),
                                                                  math.sin(heading)])
     out = {**o, "center": [round(float(cx), 3), round(float(cy), 3)]}
-    if "size" in o and rng.random() < 0.3:      # a push that also turns it a little
+    if "size" in o and nudge and rng.random() < 0.3:
         out["yaw"] = round(float(o.get("yaw", 0.0) + rng.uniform(-0.15, 0.15)), 4)
-    return out
-
-
-def _moved(o: dict, rng) -> dict:
-    length = rng.uniform(*MOVE)
-    heading = rng.uniform(-math.pi, math.pi)
-    cx, cy = np.asarray(o["center"], float) + length * np.array([math.cos(heading),
-                                                                 math.sin(heading)])
-    out = {**o, "center": [round(float(cx), 3), round(float(cy), 3)]}
-    if "size" in o:
+    elif "size" in o and not nudge:
         out["yaw"] = round(float(o.get("yaw", 0.0) + rng.choice([0.0, math.pi / 2,
-                                                                  -math.pi / 2])), 4)
+                                                                 -math.pi / 2])), 4)
     return out
 
 
@@ -185,7 +178,8 @@ def lifelong_scenario(layout: str, n_sessions: int = 100, seed: int = 1):
                     change = {"remove": oid}
                 else:
                     oid = str(rng.choice(pool))
-                    o = (_nudged if kind == "nudge" else _moved)(movable[oid], rng)
+                    o = _shifted(movable[oid], rng, NUDGE if kind == "nudge" else MOVE,
+                                 kind == "nudge")
                     trial = {**movable, oid: o}
                     change = {"move": oid, "to": o["center"] + ([o["yaw"]] if "size" in o
                                                                 else [])}

@@ -62,24 +62,11 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
         x, y = hit_points[i, 0], hit_points[i, 1]
         if math.isnan(x) or math.isnan(y):
             continue
-        dx, dy = x - sensor[0], y - sensor[1]
-        d = math.hypot(dx, dy)
-        if d <= 0.0:
-            continue
-        ux, uy = dx / d, dy / d
-        hit_col, hit_row = int(math.floor(x)), int(math.floor(y))
-        for k in range(1, STEPS_PER_CELL * band + 1):
-            s = k / STEPS_PER_CELL
-            col, row = int(math.floor(x + s * ux)), int(math.floor(y + s * uy))
-            if (col == hit_col and row == hit_row) or not (0 <= col < width
-                                                           and 0 <= row < height):
-                continue
-            idx = row * width + col
-            if test_and_set(marks, idx):
-                listed[n_listed] = idx
-                n_listed += 1
-                if behind_flat[idx] < SATURATED:
-                    behind_flat[idx] += 1
+        d = math.hypot(x - sensor[0], y - sensor[1])
+        if d > 0.0:
+            n_listed = _count_along(x, y, (x - sensor[0]) / d, (y - sensor[1]) / d, band,
+                                    math.inf, behind_flat, width, height, marks, listed,
+                                    n_listed)
     for i in range(2, n - 2):
         x, y = hit_points[i, 0], hit_points[i, 1]
         xa, ya = hit_points[i - 2, 0], hit_points[i - 2, 1]
@@ -95,24 +82,35 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
         ux, uy = dx / d, dy / d
         if abs(ux * ty - uy * tx) / tn < min_sine:
             continue
-        hit_col, hit_row = int(math.floor(x)), int(math.floor(y))
-        for k in range(1, STEPS_PER_CELL * band + 1):
-            s = k / STEPS_PER_CELL
-            if s >= d:
-                break
-            col, row = int(math.floor(x - s * ux)), int(math.floor(y - s * uy))
-            if (col == hit_col and row == hit_row) or not (0 <= col < width
-                                                           and 0 <= row < height):
-                continue
-            idx = row * width + col
-            if test_and_set(marks, idx):
-                listed[n_listed] = idx
-                n_listed += 1
-                if pass_flat[idx] < SATURATED:
-                    pass_flat[idx] += 1
+        # back towards the sensor, not past it
+        n_listed = _count_along(x, y, -ux, -uy, band, d, pass_flat, width, height, marks,
+                                listed, n_listed)
     for k in range(n_listed):
         idx = listed[k]
         marks[idx >> 3] = marks[idx >> 3] & ~(1 << (idx & 7))
+    return n_listed
+
+
+@njit(cache=True, inline="always")
+def _count_along(x, y, ux, uy, band, reach, counts, width, height, marks, listed, n_listed):
+    """Count (``counts``, flat) the cells of the points 1/STEPS_PER_CELL ... ``band`` cells
+    from the hit (x, y) along (ux, uy), closer than ``reach``, but for the hit's own cell and
+    the cells the scan counted already (``marks``; each newly counted one listed). Returns
+    the new length of ``listed``."""
+    hit_col, hit_row = int(math.floor(x)), int(math.floor(y))
+    for k in range(1, STEPS_PER_CELL * band + 1):
+        s = k / STEPS_PER_CELL
+        if s >= reach:
+            break
+        col, row = int(math.floor(x + s * ux)), int(math.floor(y + s * uy))
+        if (col == hit_col and row == hit_row) or not (0 <= col < width and 0 <= row < height):
+            continue
+        idx = row * width + col
+        if test_and_set(marks, idx):
+            listed[n_listed] = idx
+            n_listed += 1
+            if counts[idx] < SATURATED:
+                counts[idx] += 1
     return n_listed
 
 

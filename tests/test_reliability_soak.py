@@ -59,10 +59,12 @@ def test_memory_time_and_scores_stay_level(short_soak):
     wall = np.array([r.wall_s for r in rows])
     assert wall[1:].max() < 2 * np.median(wall[1:])
     # the robot profile's figures (the paper profile's, with no pose check: precision
-    # 0.843-0.958, recall 0.334-0.755)
-    assert [round(r.precision, 3) for r in rows] == [0.98, 0.974, 0.986, 0.992]
-    assert [round(r.recall, 3) for r in rows] == [0.861, 0.712, 0.737, 0.321]
-    assert [r.targets for r in rows] == [180, 483, 475, 290]
-    # the robot profile keeps hit buffers for the growth into the unknown
-    # besides the flag buffers: 2.15-2.20 MB (the paper profile's 1.74-1.78)
-    assert all(r.updater_state_mb < 2.5 for r in rows)
+    # 0.843-0.958, recall 0.334-0.755; the robot profile's before the faces rule: precision
+    # 0.98, 0.974, 0.986, 0.992, recall 0.861, 0.712, 0.737, 0.321)
+    assert [round(r.precision, 3) for r in rows] == [0.98, 0.975, 0.983, 0.968]
+    assert [round(r.recall, 3) for r in rows] == [0.861, 0.745, 0.762, 0.491]
+    assert [r.targets for r in rows] == [180, 483, 491, 273]
+    # the robot profile keeps hit buffers for the growth into the unknown and the faces
+    # rule's counts besides the flag buffers: 2.81-2.86 MB (before the faces rule 2.15-2.20,
+    # the paper profile's 1.74-1.78)
+    assert all(r.updater_state_mb < 3.0 for r in rows)

@@ -37,15 +37,34 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
     returning); ``listed``: int64 room for n * (2 * STEPS_PER_CELL * band + 1) cells.
     ``behind`` counts the cells within ``band`` cells past a beam's hit, along the beam,
     whatever the angle: a surface stands in front of them. Each cell counts once per scan, as
-    the first of hit, behind and crossed that it is. ``now``: a bit plane of the cells hit in
-    this session (set here, never cleared: the session's own). The surface a beam meets is the line through the
-    hits of beams i - 2 and i + 2 (when both are valid and within 8 cells of each other).
-    Returns the count of cells counted."""
-    n = hit_points.shape[0]
+    the first of hit, behind and crossed that it is (``_count_hits``, ``_count_along``,
+    ``_count_crossed``). ``now``: a bit plane of the cells hit in this session (set here,
+    never cleared: the session's own). Returns the count of cells counted."""
     height, width = hits.shape
-    hit_flat, pass_flat, behind_flat = hits.reshape(-1), passes.reshape(-1), behind.reshape(-1)
+    n_listed = _count_hits(hit_points, hits.reshape(-1), width, height, marks, listed, now)
+    for i in range(hit_points.shape[0]):
+        x, y = hit_points[i, 0], hit_points[i, 1]
+        if math.isnan(x) or math.isnan(y):
+            continue
+        d = math.hypot(x - sensor[0], y - sensor[1])
+        if d > 0.0:
+            n_listed = _count_along(x, y, (x - sensor[0]) / d, (y - sensor[1]) / d, band,
+                                    math.inf, behind.reshape(-1), width, height, marks,
+                                    listed, n_listed)
+    n_listed = _count_crossed(hit_points, sensor, band, min_sine, passes.reshape(-1), width,
+                              height, marks, listed, n_listed)
+    for k in range(n_listed):
+        idx = listed[k]
+        marks[idx >> 3] = marks[idx >> 3] & ~(1 << (idx & 7))
+    return n_listed
+
+
+@njit(cache=True)
+def _count_hits(hit_points, counts, width, height, marks, listed, now):
+    """The cells the scan's valid hits lie in, each counted once (``counts``, flat), listed,
+    and set in ``now``. Returns how many were listed."""
     n_listed = 0
-    for i in range(n):
+    for i in range(hit_points.shape[0]):
         x, y = hit_points[i, 0], hit_points[i, 1]
         if math.isnan(x) or math.isnan(y):
             continue
@@ -56,18 +75,18 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
             if test_and_set(marks, idx):
                 listed[n_listed] = idx
                 n_listed += 1
-                if hit_flat[idx] < SATURATED:
-                    hit_flat[idx] += 1
-    for i in range(n):
-        x, y = hit_points[i, 0], hit_points[i, 1]
-        if math.isnan(x) or math.isnan(y):
-            continue
-        d = math.hypot(x - sensor[0], y - sensor[1])
-        if d > 0.0:
-            n_listed = _count_along(x, y, (x - sensor[0]) / d, (y - sensor[1]) / d, band,
-                                    math.inf, behind_flat, width, height, marks, listed,
-                                    n_listed)
-    for i in range(2, n - 2):
+                if counts[idx] < SATURATED:
+                    counts[idx] += 1
+    return n_listed
+
+
+@njit(cache=True)
+def _count_crossed(hit_points, sensor, band, min_sine, counts, width, height, marks, listed,
+                   n_listed):
+    """The cells crossed within ``band`` cells before the hit by each beam that meets the line
+    through the hits of beams i - 2 and i + 2 (both valid, within 8 cells of each other) at
+    ``min_sine`` or more (``_count_along`` back towards the sensor, not past it)."""
+    for i in range(2, hit_points.shape[0] - 2):
         x, y = hit_points[i, 0], hit_points[i, 1]
         xa, ya = hit_points[i - 2, 0], hit_points[i - 2, 1]
         xb, yb = hit_points[i + 2, 0], hit_points[i + 2, 1]
@@ -80,14 +99,9 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
         if tn <= 0.0 or tn > 8.0 or d <= 0.0:
             continue
         ux, uy = dx / d, dy / d
-        if abs(ux * ty - uy * tx) / tn < min_sine:
-            continue
-        # back towards the sensor, not past it
-        n_listed = _count_along(x, y, -ux, -uy, band, d, pass_flat, width, height, marks,
-                                listed, n_listed)
-    for k in range(n_listed):
-        idx = listed[k]
-        marks[idx >> 3] = marks[idx >> 3] & ~(1 << (idx & 7))
+        if abs(ux * ty - uy * tx) / tn >= min_sine:
+            n_listed = _count_along(x, y, -ux, -uy, band, d, counts, width, height, marks,
+                                    listed, n_listed)
     return n_listed
 
 
@@ -223,10 +237,4 @@ def small_structures(ref, max_cells, small, seen, stack, members):
     return found
 
 
-def decayed(counts: np.ndarray) -> np.ndarray:
-    """The counts a new session starts from: halved, so a scan of the last session weighs half
-    one of this session, and one of ten sessions ago a thousandth."""
-    return counts >> np.uint8(1)
-
-
-__all__ = ["SATURATED", "count_faces", "decayed", "move_faces", "small_structures"]
+__all__ = ["SATURATED", "count_faces", "move_faces", "small_structures"]

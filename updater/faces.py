@@ -6,7 +6,8 @@ a face that one session sees only a few times is moved once a few sessions have 
 With ``face_sessions`` 2 a cell is moved only when the rule would have moved it at the end of
 the last session too (``confirmed``): what a single session saw, a pose a few centimetres off
 along a whole recording, moves nothing.
-Three bytes per cell with the rule on, none with it off; bounded, however many sessions.
+Three bytes per cell once a scan has counted, none before (the rule off, or only poses
+taken as given); bounded, however many sessions.
 """
 
 from __future__ import annotations
@@ -37,11 +38,14 @@ class FaceCounts:
     def start(cls, shape: tuple[int, int], on: bool, carried: FaceCounts | None
               ) -> FaceCounts:
         """The counts a session starts from: ``carried`` (checked against the map's shape),
-        or zeros; empty with the rule off (``on`` False), whatever was carried."""
+        or none yet, made at the first scan that counts (``count``): a session whose scans
+        never count (the rule off, or poses taken as given) holds no byte of them."""
+        empty = cls(*(np.zeros((0, 0), np.uint8) for _ in range(3)))
         if not on:
-            return cls(*(np.zeros((0, 0), np.uint8) for _ in range(3)))
+            return empty
         if carried is None or carried.hits.size == 0:
-            return cls(*(np.zeros(shape, np.uint8) for _ in range(3)))
+            empty._shape = tuple(shape)
+            return empty
         if not isinstance(carried, FaceCounts):
             raise UpdaterError(f"faces must be a FaceCounts, got {type(carried).__name__}")
         for name in ("hits", "passes", "behind"):
@@ -54,6 +58,7 @@ class FaceCounts:
                    *(None if a is None else a.copy() for a in (carried.now, carried.confirmed)))
 
     def __post_init__(self):
+        self._shape = self.hits.shape
         self._scratch(self.hits.shape)
 
     def _scratch(self, shape) -> None:
@@ -74,6 +79,11 @@ class FaceCounts:
 
     def count(self, ws, sensor: np.ndarray, cfg: UpdaterConfig) -> None:
         """A processed scan's beams (``ws.hits``, as the classifier left them) at ``sensor``."""
+        if self.hits.size == 0:                 # the session's first scan that counts
+            self.hits, self.passes, self.behind = (np.zeros(self._shape, np.uint8)
+                                                   for _ in range(3))
+            self.now = self.confirmed = None
+            self._scratch(self._shape)
         n = ws.hits.shape[0]
         room = n * (2 * kernels().STEPS_PER_CELL * cfg.face_band + 1)
         if self._listed.size < room:
@@ -85,6 +95,8 @@ class FaceCounts:
              res: float) -> tuple[int, int]:
         """``out`` (the output cells) with the faces moved; (cells freed, cells drawn). The
         cells the rule would move are left in ``candidates``."""
+        if self.hits.size == 0:                 # nothing counted: nothing to move
+            return 0, 0
         if getattr(self, "_small", None) is None:       # once per reference map
             self._small = small_structure_bits(ref, cfg.face_max_area, res)
         planes = (self.now, self.confirmed, self.candidates, self._small)

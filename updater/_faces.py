@@ -72,11 +72,7 @@ def _count_hits(hit_points, counts, width, height, marks, listed, now):
         if 0 <= col < width and 0 <= row < height:
             idx = row * width + col
             test_and_set(now, idx)
-            if test_and_set(marks, idx):
-                listed[n_listed] = idx
-                n_listed += 1
-                if counts[idx] < SATURATED:
-                    counts[idx] += 1
+            n_listed = _count_once(idx, counts, marks, listed, n_listed)
     return n_listed
 
 
@@ -119,12 +115,19 @@ def _count_along(x, y, ux, uy, band, reach, counts, width, height, marks, listed
         col, row = int(math.floor(x + s * ux)), int(math.floor(y + s * uy))
         if (col == hit_col and row == hit_row) or not (0 <= col < width and 0 <= row < height):
             continue
-        idx = row * width + col
-        if test_and_set(marks, idx):
-            listed[n_listed] = idx
-            n_listed += 1
-            if counts[idx] < SATURATED:
-                counts[idx] += 1
+        n_listed = _count_once(row * width + col, counts, marks, listed, n_listed)
+    return n_listed
+
+
+@njit(cache=True, inline="always")
+def _count_once(idx, counts, marks, listed, n_listed):
+    """Count cell ``idx`` (saturating) unless the scan counted it already (``marks``), listing
+    it to clear its mark after the scan. Returns the new length of ``listed``."""
+    if test_and_set(marks, idx):
+        listed[n_listed] = idx
+        n_listed += 1
+        if counts[idx] < SATURATED:
+            counts[idx] += 1
     return n_listed
 
 

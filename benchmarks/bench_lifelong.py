@@ -494,8 +494,13 @@ def main(argv=None) -> int:
                          "as bags and replayed one a session through `mapupdate update --state "
                          "--new-session`, each map checked against the run's")
     args = ap.parse_args(argv)
+    if not 2 <= args.sessions <= 1000:
+        ap.error(f"--sessions must be a whole number from 2 to 1000, got {args.sessions}")
     if args.recordings:
         layout, _, seed = args.recordings.partition(":")
+        if not (seed or "1").isdigit():
+            ap.error(f"--recordings takes LAYOUT:SEED with a whole seed, got "
+                     f"{args.recordings!r}")
         return 0 if recordings(layout, int(seed or 1), args.sessions, args.out) else 1
     methods = args.methods.split(",")
     bad = [m for m in methods if m not in METHODS]

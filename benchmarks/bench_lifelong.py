@@ -494,6 +494,8 @@ def main(argv=None) -> int:
                          "as bags and replayed one a session through `mapupdate update --state "
                          "--new-session`, each map checked against the run's")
     args = ap.parse_args(argv)
+    if args.out.exists() and not args.out.is_dir():
+        ap.error(f"--out {args.out}: a file, not a folder")
     if not 2 <= args.sessions <= 1000:
         ap.error(f"--sessions must be a whole number from 2 to 1000, got {args.sessions}")
     if args.recordings:

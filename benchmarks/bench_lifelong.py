@@ -33,10 +33,12 @@ resume). Runs go in ``--workers`` processes.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import json
 import math
 import os
+import shutil
 import sys
 import time
 from dataclasses import asdict
@@ -421,11 +423,11 @@ def recordings(layout: str, seed: int, n: int, out_dir: Path) -> bool:
     (folder / "scenario.yaml").write_text(yaml.safe_dump(tree, sort_keys=False))
     rec = SessionBagRecorder(folder / "bags", "ros1")
     t0 = time.perf_counter()
-    if not (folder / "run" / "report.md").exists():
-        run_scenario(folder / "scenario.yaml", RunOptions(out=folder / "run", progress=False,
-                                                          observer=rec))
-    else:
-        rec.paths = {p.stem: p for p in (folder / "bags").glob("*.bag")}
+    # afresh each time: a run left by other code would not be this code's chained run
+    for old in ("run", "bags", "replayed"):
+        shutil.rmtree(folder / old, ignore_errors=True)
+    run_scenario(folder / "scenario.yaml", RunOptions(out=folder / "run", progress=False,
+                                                      observer=rec))
     t_run = time.perf_counter() - t0
     # the recorded poses replayed as the run placed them: refined by the pose check as the
     # run's own localiser's were, and not smoothed
@@ -439,15 +441,11 @@ def recordings(layout: str, seed: int, n: int, out_dir: Path) -> bool:
     for name in names:
         out = folder / "replayed" / f"{name}.yaml"
         out.parent.mkdir(exist_ok=True)
-        with open(os.devnull, "w") as quiet:
-            old, sys.stdout = sys.stdout, quiet
-            try:
-                code = cli(["update", "--map", str(previous), "--log", str(rec.paths[name]),
-                            "--out", str(out), "--state", str(state), "--new-session",
-                            "--config", str(folder / "config.yaml"), "--smooth-poses", "0",
-                            "--no-progress"])
-            finally:
-                sys.stdout = old
+        with open(os.devnull, "w") as quiet, contextlib.redirect_stdout(quiet):
+            code = cli(["update", "--map", str(previous), "--log", str(rec.paths[name]),
+                        "--out", str(out), "--state", str(state), "--new-session",
+                        "--config", str(folder / "config.yaml"), "--smooth-poses", "0",
+                        "--no-progress"])
         if code != 0:
             raise SystemExit(f"update of {name} failed ({code})")
         differ = int(np.count_nonzero(load_map(out).data != load_map(

@@ -43,11 +43,11 @@ class FaceCounts:
         empty = cls(*(np.zeros((0, 0), np.uint8) for _ in range(3)))
         if not on:
             return empty
+        if carried is not None and not isinstance(carried, FaceCounts):
+            raise UpdaterError(f"faces must be a FaceCounts, got {type(carried).__name__}")
         if carried is None or carried.hits.size == 0:
             empty._shape = tuple(shape)
             return empty
-        if not isinstance(carried, FaceCounts):
-            raise UpdaterError(f"faces must be a FaceCounts, got {type(carried).__name__}")
         for name in ("hits", "passes", "behind"):
             a = getattr(carried, name)
             if not isinstance(a, np.ndarray) or a.shape != tuple(shape) or a.dtype != np.uint8:

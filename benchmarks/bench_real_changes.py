@@ -55,7 +55,9 @@ def one_case(job):
     from onboard.logmap import map_from_log
     from onboard.replay import LogSource, Outputs, update_from_log
 
-    name, seed, people, work, overrides, methods, twice = job
+    # bench_static makes jobs without the last (twice: the recording played again)
+    name, seed, people, work, overrides, methods, *twice = job
+    twice = bool(twice and twice[0])
     log = DATA / f"{name}.log.gz"
     work = Path(work)
     map_path = work / f"{name}.yaml"

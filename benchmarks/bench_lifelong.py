@@ -15,7 +15,9 @@ Methods: ``paper`` (the paper profile), ``robot`` (the robot profile), ``hybrid`
 session, exactly as ``mapupdate run`` does (``runner.run_update_session``).
 
 Per session (``bench_soak.SessionRow``): precision and recall on the observable cells M(i-1) got
-wrong (the targets, new and left over), recall on the new ones, ghosts, cells occupied in the
+wrong (the targets, new and left over), recall on the new ones, ghosts (occupied cells of M(i)
+far from the truth's that a person covered; split into those the session drew and those the
+oracle keeps too, cells of M(i-1) the route never showed), cells occupied in the
 truth that the session freed (a wall, rack or unmoved object), OPDF of M(i) and of the oracle,
 the localiser's APE, wall time and peak memory. Per run: trends (least squares per session) and
 first / last fifth; the bars of the robot profile checked per layout and seed.
@@ -300,6 +302,11 @@ def summarise(run: dict) -> dict:
         if all("standing_freed" in r for r in rows) else None,
         "ghosts_median": float(np.median(_vals(rows, "ghosts"))),
         "ghosts": int(sum(_vals(rows, "ghosts"))),
+        # rows written before the ghosts were split: None
+        "ghosts_drawn_median": float(np.median(_vals(rows, "ghosts_drawn")))
+        if all("ghosts_drawn" in r for r in rows) else None,
+        "ghosts_oracle_median": float(np.median(_vals(rows, "ghosts_oracle")))
+        if all("ghosts_oracle" in r for r in rows) else None,
         "opdf_last": float(np.mean(_vals(rows, "opdf")[-k:])),
         "opdf_gap_last": float(np.mean(opdf_gap[-k:])),
         "ape": _mean(_vals(rows, "ape_rmse")),
@@ -326,10 +333,16 @@ def bars(s: dict) -> dict:
     }
 
 
+def _split(s: dict) -> str:
+    if s["ghosts_drawn_median"] is None:
+        return ""
+    return f"; {s['ghosts_drawn_median']:.0f} / {s['ghosts_oracle_median']:.0f}"
+
+
 def print_tables(runs: list[dict]) -> None:
     print("| layout | seed | method | recall (trend/session) | first / last fifth | recall on new "
           "| precision (trend) | cells of G freed (of a wall, rack or unmoved object) | "
-          "ghosts (median/session) | OPDF last fifth "
+          "ghosts (median/session; drawn / oracle's) | OPDF last fifth "
           "(oracle - M) | APE m | s/session (last/first fifth) | peak MB (last/first) | "
           "bars missed |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -340,7 +353,7 @@ def print_tables(runs: list[dict]) -> None:
               f"({s['recall_trend']:+.4f}) | {s['recall_first']:.3f} / {s['recall_last']:.3f} | "
               f"{s['recall_new']:.3f} | {s['precision']:.3f} ({s['precision_trend']:+.4f}) | "
               f"{s['g_freed']} ({'n/a' if s['standing_freed'] is None else s['standing_freed']})"
-              f" | {s['ghosts']} ({s['ghosts_median']:.0f}) | "
+              f" | {s['ghosts']} ({s['ghosts_median']:.0f}{_split(s)}) | "
               f"{s['opdf_last']:.2f} ({s['opdf_gap_last']:+.2f}) | {s['ape']:.3f} | "
               f"{s['wall_s']:.2f} ({100 * s['time_change']:+.0f} %) | {s['peak_mb']:.0f} "
               f"({100 * s['memory_change']:+.1f} %) | "
@@ -353,7 +366,8 @@ def print_tables(runs: list[dict]) -> None:
         ss = [summarise(r) for r in runs if r["method"] == method]
         if not ss:
             continue
-        m = {k: float(np.mean([s[k] for s in ss])) for k in ss[0] if k != "standing_freed"}
+        m = {k: float(np.mean([s[k] for s in ss])) for k in ss[0]
+             if k not in ("standing_freed", "ghosts_drawn_median", "ghosts_oracle_median")}
         print(f"| {method} | {len(ss)} | {m['recall']:.3f} | {m['recall_trend']:+.4f} | "
               f"{m['recall_first']:.3f} / {m['recall_last']:.3f} | {m['precision']:.3f} | "
               f"{m['g_freed']:.1f} | {m['ghosts_median']:.1f} | {m['opdf_gap_last']:+.2f} |")
@@ -382,7 +396,7 @@ def figure(runs: list[dict], path: Path) -> None:
                 series.append(y)
             n = min(len(y) for y in series)
             mean = np.nanmean(np.vstack([y[:n] for y in series]), axis=0)
-            k = 9                   # a moving mean over 9 sessions
+            k = min(9, n)           # a moving mean over 9 sessions (fewer in a short run)
             ok = np.isfinite(mean)      # a session with no change has no precision
             total = np.convolve(np.where(ok, mean, 0.0), np.ones(k), mode="valid")
             smooth = total / np.maximum(np.convolve(ok.astype(float), np.ones(k), mode="valid"),

@@ -84,6 +84,8 @@ class SessionRow:
     g_freed: int = 0     # cells occupied in G_i that the session freed
     standing_freed: int = 0  # ... of them, cells of a wall, rack or object the session did
                              # not move
+    ghosts_drawn: int = 0    # ghosts the session drew (not occupied in M_{i-1})
+    ghosts_oracle: int = 0   # ghosts of the oracle's map: left where the route never looked
 
 
 # --- the rearrangements -------------------------------------------------------------------------
@@ -291,7 +293,12 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
                                     & (previous.data != FREE)).sum()),
                                int((standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
                                     & (res.updated.data == FREE)
-                                    & (previous.data != FREE)).sum())))
+                                    & (previous.data != FREE)).sum()),
+                               int((ghost_mask(res.updated, res.truth, res.masks["people"])
+                                    & (previous.data != OCCUPIED)).sum()),
+                               int(ghost_mask(ev.oracle_map(previous, res.truth,
+                                                            res.masks["observable"]),
+                                              res.truth, res.masks["people"]).sum())))
         previous, faces = res.updated, res.faces
         last_targets = targets
         last_truth = res.truth
@@ -301,6 +308,14 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
             print(f"  {row.name}: {row.peak_rss_mb:.0f} MB, P {_f(row.precision)}, "
                   f"R {_f(row.recall)}, {row.wall_s:.1f} s", file=sys.stderr, flush=True)
     return rows
+
+
+def ghost_mask(grid, truth, people: np.ndarray) -> np.ndarray:
+    """Bool (H, W): the cells ``evaluation.ghost_cells`` counts."""
+    from gridmap import OCCUPIED
+    import evaluation as ev
+
+    return (grid.data == OCCUPIED) & ~ev.near(truth.data == OCCUPIED) & people
 
 
 def standing_cells(scn, session: int, frame) -> np.ndarray:

@@ -96,6 +96,22 @@ def make_method(name: str, reference: OccupancyGrid, updater_config=None, faces=
     return LogOddsMethod(reference, config, prior=(name == "fuse"))
 
 
+def next_session(name: str, last, reference: OccupancyGrid, updater_config=None):
+    """The method ``name`` on ``reference`` as the session after ``last`` (a method, or None):
+    buffers and gate afresh, with what ``last`` carries from session to session
+    (``carried_faces``: the faces rule's counts, halved) when it has any and ``reference`` is
+    in its map's frame. Without it, as ``make_method``."""
+    carry = getattr(last, "carried_faces", None)
+    faces = carry() if carry is not None and last.reference_map.same_frame(reference) else None
+    return make_method(name, reference, updater_config, faces=faces)
+
+
+def face_cells(method) -> int:
+    """Cells the faces rule holds counts for in ``method`` (0 for a method without it)."""
+    cells = getattr(method, "face_cells", None)
+    return 0 if cells is None else cells()
+
+
 class MapOutput:
     """The interface's map side, from a method's reference map (``_ref``, ``_res``,
     ``_origin``) and the map as it stands (``current()``): what the baselines and the hybrid
@@ -243,6 +259,7 @@ class HybridMethod(MapOutput):
             raise MethodError(f"hybrid: radius must be a number in (0, 5] m, got {radius!r}")
         self.paper = MapUpdater(reference, config, faces=faces)
         self.carried_faces = self.paper.carried_faces
+        self.face_cells = self.paper.face_cells
         self.config = self.paper.config
         self.radius = float(radius)
         self.mapper = LogOddsMapper(reference, LogOddsParams(hit_guard=1))

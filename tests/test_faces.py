@@ -110,15 +110,16 @@ def test_counts_follow_the_rule_as_written():
     for band, min_sine in ((4, 0.5), (2, 0.0), (6, 0.9)):
         hits, passes, behind = (np.zeros(shape, np.uint8) for _ in range(3))
         marks = np.zeros((shape[0] * shape[1] + 7) // 8, np.uint8)
-        now = marks.copy()
+        now, crossed = marks.copy(), marks.copy()
         listed = np.zeros(points.shape[0] * (8 * band + 1), np.int64)
         for _ in range(2):          # two scans: every count twice
             kernels().count_faces(points, sensor, band, min_sine, hits, passes, behind, marks,
-                                  listed, now)
+                                  listed, now, crossed)
         want = _reference_counts(points, sensor, band, min_sine, shape)
         assert not marks.any()
-        now_cells = np.unpackbits(now, bitorder="little")[:hits.size].reshape(shape)
-        assert np.array_equal(now_cells.astype(bool), want[0] > 0)
+        for plane, counts in ((now, want[0]), (crossed, want[1])):
+            cells = np.unpackbits(plane, bitorder="little")[:hits.size].reshape(shape)
+            assert np.array_equal(cells.astype(bool), counts > 0)
         for got, expected in zip((hits, passes, behind), want):
             assert np.array_equal(got, 2 * expected), band
             assert expected.sum() > 50
@@ -142,16 +143,21 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     hits[6, 7] = 9                            # four cells from it, unknown: drawn
     ref[6, 7] = UNKNOWN
     hits[7, 6] = 9                            # three cells from it, hit in earlier sessions only
+    passes[6, 3] = 10                         # crossed in earlier sessions only: stays
     now = np.zeros(ref.size, np.uint8)
     now[np.flatnonzero(hits)] = 1
     now[7 * 12 + 6] = 0
     now = np.packbits(now, bitorder="little")
+    crossed = np.zeros(ref.size, np.uint8)
+    crossed[np.flatnonzero(passes)] = 1
+    crossed[6 * 12 + 3] = 0
+    crossed = np.packbits(crossed, bitorder="little")
     out = ref.copy()
     candidates = np.full_like(now, 0xFF)
     small = np.full_like(now, 0xFF)
     freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind),
-                                        (now, now * 0, candidates, small), 4, 5, 0.1, 5, 0.34,
-                                        False)
+                                        (now, crossed, now * 0, candidates, small), 4, 5, 0.1, 5,
+                                        0.34, False)
     assert (freed, drawn) == (1, 2)
     changed = {(int(r), int(c)): int(out[r, c]) for r, c in zip(*np.nonzero(out != ref))}
     assert changed == {(2, 3): FREE, (2, 5): OCCUPIED, (6, 7): OCCUPIED}
@@ -162,13 +168,13 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     confirmed[2 * 12 + 5] = 1
     confirmed[9 * 12 + 9] = 1                 # not a candidate now: stays
     out = ref.copy()
-    planes = (now, np.packbits(confirmed, bitorder="little"), candidates, small)
+    planes = (now, crossed, np.packbits(confirmed, bitorder="little"), candidates, small)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
                                 True) == (0, 1)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
     # a face of a large structure (a wall, a rack) stays, and nothing is drawn beside it
     out = ref.copy()
-    planes = (now, now * 0, candidates, small * 0)
+    planes = (now, crossed, now * 0, candidates, small * 0)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
                                 False) == (0, 0)
 
@@ -259,6 +265,12 @@ def test_counts_go_on_into_the_next_session_halved():
                      seconds=20.0, seed=2)
     moved = second2.updated_map().data != first2.updated_map().data
     assert moved.sum() >= 10
+    # a session that saw nothing moves nothing: the carried counts alone confirm no cell
+    # (they freed 41 cells of a recording's second session before the crossed plane)
+    for config, last in ((two, first2), (_config(), first)):
+        idle = MapUpdater(last.updated_map(), config, faces=last.carried_faces())
+        assert idle.face_cells() > 0
+        assert np.array_equal(idle.updated_map().data, last.updated_map().data)
     # with the rule off nothing is kept
     assert MapUpdater(ref, _config(move_faces=False), faces=carried).carried_faces().hits.size \
         == 0
@@ -305,3 +317,29 @@ def test_only_scans_the_pose_check_placed_count_by_default():
     assert given.carried_faces().hits.size == 0         # nothing counted, nothing held
     assert placed.carried_faces().hits.max() > 0
     assert given.state_bytes() < placed.state_bytes() - 3 * ref.data.size
+
+
+def test_a_node_s_next_session_carries_the_counts_of_its_frame_only():
+    """``onboard.methods.next_session``, as the live nodes' commit uses it: the paper's updater
+    and the hybrid carry the counts halved into a map of the same frame; another frame, a
+    reset (no last session) or a method without the rule start empty."""
+    from onboard.methods import face_cells, make_method, next_session
+
+    ref = world.rasterise(world.room_walls(), hollow=[OLD])
+    first = _drive(ref, world.room_walls() + [NEW], _config(), seconds=10.0)
+    f = first._faces
+    held = int(((f.hits > 0) | (f.passes > 0) | (f.behind > 0)).sum())
+    halved = int(((f.hits > 1) | (f.passes > 1) | (f.behind > 1)).sum())
+    assert face_cells(first) == held and 0 < halved < held
+    nxt = next_session("paper", first, first.updated_map(), _config())
+    assert face_cells(nxt) == halved
+    assert np.array_equal(nxt.reference_map.data, first.updated_map().data)
+    hybrid = next_session("hybrid", first, ref, _config())
+    assert face_cells(hybrid) == halved
+    assert face_cells(next_session("hybrid", hybrid, ref, _config())) == \
+        int(((f.hits > 3) | (f.passes > 3) | (f.behind > 3)).sum())
+    other = OccupancyGrid(np.full((50, 60), FREE, np.int8), 0.05)
+    assert face_cells(next_session("paper", first, other, _config())) == 0
+    assert face_cells(next_session("paper", None, ref, _config())) == 0
+    assert face_cells(next_session("fuse", first, ref, _config())) == 0
+    assert face_cells(make_method("none", ref, _config())) == 0

@@ -30,7 +30,8 @@ STEPS_PER_CELL = 4          # samples per cell along a beam's last ``band`` cell
 
 
 @njit(cache=True)
-def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks, listed, now):
+def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks, listed, now,
+                crossed):
     """One processed scan into the counts. ``hit_points`` (n, 2) [grid units], NaN for an
     invalid beam; ``sensor`` (gx, gy, yaw); ``band`` [cells]; ``hits``, ``passes``,
     ``behind``: uint8 (H, W); ``marks``: a bit plane, all clear (cleared again before
@@ -38,8 +39,9 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
     ``behind`` counts the cells within ``band`` cells past a beam's hit, along the beam,
     whatever the angle: a surface stands in front of them. Each cell counts once per scan, as
     the first of hit, behind and crossed that it is (``_count_hits``, ``_count_along``,
-    ``_count_crossed``). ``now``: a bit plane of the cells hit in this session (set here,
-    never cleared: the session's own). Returns the count of cells counted."""
+    ``_count_crossed``). ``now`` and ``crossed``: bit planes of the cells hit and of those
+    counted as crossed in this session (set here, never cleared: the session's own). Returns
+    the count of cells counted."""
     height, width = hits.shape
     n_listed = _count_hits(hit_points, hits.reshape(-1), width, height, marks, listed, now)
     for i in range(hit_points.shape[0]):
@@ -51,8 +53,11 @@ def count_faces(hit_points, sensor, band, min_sine, hits, passes, behind, marks,
             n_listed = _count_along(x, y, (x - sensor[0]) / d, (y - sensor[1]) / d, band,
                                     math.inf, behind.reshape(-1), width, height, marks,
                                     listed, n_listed)
+    n_before = n_listed
     n_listed = _count_crossed(hit_points, sensor, band, min_sine, passes.reshape(-1), width,
                               height, marks, listed, n_listed)
+    for k in range(n_before, n_listed):
+        test_and_set(crossed, listed[k])
     for k in range(n_listed):
         idx = listed[k]
         marks[idx >> 3] = marks[idx >> 3] & ~(1 << (idx & 7))
@@ -136,13 +141,15 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
                confirm):
     """The output (``out``, int8 (H, W), M with the other rules' changes) with the faces moved.
     ``counts``: (hits, passes, behind), uint8 (H, W) each; ``planes``: the bit planes (now,
-    confirmed, candidates, small). Only faces of small structures of M (``small``:
+    crossed, confirmed, candidates, small). Only faces of small structures of M (``small``:
     ``small_structures``) move: a wall's or a rack's stays where M has it, however a
     recording's poses lie along it. The candidates: an occupied cell of M (``ref``) of a
     small structure that ``out`` keeps occupied, crossed by ``min_passes`` scans or more, and
     ended in or stood behind a hit by at most ``free_ratio`` of that many (the back of a
     wall, crossed by a beam a pose error put behind it, stands behind the face that the other
-    beams hit), to be freed; a free or unknown cell of M that ``out`` keeps so (behind a face
+    beams hit), and crossed by a beam of this session (``crossed``: the counts carried from
+    earlier sessions would otherwise confirm themselves in a session that never looked), to be
+    freed; a free or unknown cell of M that ``out`` keeps so (behind a face
     of M the world's face stands in M's unknown), ended in by ``min_hits`` scans or more and
     crossed by at most ``draw_ratio`` of that many, whose nearest occupied cell of M lies 2
     to ``band`` cells away (Chebyshev; one cell away it is the same face, within the
@@ -154,7 +161,7 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
     only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
     (cells freed, cells drawn)."""
     hits, passes, behind = counts
-    now, confirmed, candidates, small = planes
+    now, crossed, confirmed, candidates, small = planes
     height, width = ref.shape
     candidates[:] = 0
     freed = drawn = 0
@@ -165,7 +172,7 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
             to = -1
             if m == OCCUPIED and out[row, col] == OCCUPIED:
                 if p >= min_passes and h + behind[row, col] <= free_ratio * p and \
-                        bit_get(small, idx):
+                        bit_get(small, idx) and bit_get(crossed, idx):
                     to = FREE
             elif m != OCCUPIED and out[row, col] == m and h >= min_hits and \
                     p <= draw_ratio * h and bit_get(now, idx):

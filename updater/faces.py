@@ -33,6 +33,9 @@ class FaceCounts:
     # bit plane of the cells the rule would have moved at the end of the last session (None:
     # none): with face_sessions 2, a cell is moved only when two sessions in a row agree
     confirmed: np.ndarray | None = None
+    # bit plane of the cells this session's steep beams crossed (counted in ``passes``): the
+    # session's own, never carried; a cell is freed only when crossed this session too
+    crossed: np.ndarray | None = None
 
     @classmethod
     def start(cls, shape: tuple[int, int], on: bool, carried: FaceCounts | None
@@ -55,7 +58,8 @@ class FaceCounts:
                                    f"{getattr(a, 'shape', None)} {getattr(a, 'dtype', None)}, "
                                    f"the map is {tuple(shape)}, uint8 expected")
         return cls(carried.hits.copy(), carried.passes.copy(), carried.behind.copy(),
-                   *(None if a is None else a.copy() for a in (carried.now, carried.confirmed)))
+                   *(None if a is None else a.copy()
+                     for a in (carried.now, carried.confirmed, carried.crossed)))
 
     def __post_init__(self):
         self._shape = self.hits.shape
@@ -68,6 +72,8 @@ class FaceCounts:
             self.now = np.zeros((n + 7) // 8, np.uint8)
         if self.confirmed is None or self.confirmed.shape != self._marks.shape:
             self.confirmed = np.zeros((n + 7) // 8, np.uint8)
+        if self.crossed is None or self.crossed.shape != self._marks.shape:
+            self.crossed = np.zeros((n + 7) // 8, np.uint8)
         self.candidates = np.zeros((n + 7) // 8, np.uint8)
         self._listed = np.zeros(0, np.int64)
 
@@ -75,21 +81,29 @@ class FaceCounts:
     def nbytes(self) -> int:
         return self.hits.nbytes + self.passes.nbytes + self.behind.nbytes + \
             self._marks.nbytes + self.now.nbytes + self.confirmed.nbytes + \
-            self.candidates.nbytes + self._listed.nbytes
+            self.crossed.nbytes + self.candidates.nbytes + self._listed.nbytes
+
+    @property
+    def cells(self) -> int:
+        """Cells with a count."""
+        if self.hits.size == 0:
+            return 0
+        return int(np.count_nonzero(self.hits | self.passes | self.behind))
 
     def count(self, ws, sensor: np.ndarray, cfg: UpdaterConfig) -> None:
         """A processed scan's beams (``ws.hits``, as the classifier left them) at ``sensor``."""
         if self.hits.size == 0:                 # the session's first scan that counts
             self.hits, self.passes, self.behind = (np.zeros(self._shape, np.uint8)
                                                    for _ in range(3))
-            self.now = self.confirmed = None
+            self.now = self.confirmed = self.crossed = None
             self._scratch(self._shape)
         n = ws.hits.shape[0]
         room = n * (2 * kernels().STEPS_PER_CELL * cfg.face_band + 1)
         if self._listed.size < room:
             self._listed = np.zeros(room, np.int64)
         kernels().count_faces(ws.hits, sensor, cfg.face_band, cfg.face_min_sine, self.hits,
-                              self.passes, self.behind, self._marks, self._listed, self.now)
+                              self.passes, self.behind, self._marks, self._listed, self.now,
+                              self.crossed)
 
     def move(self, ref: np.ndarray, out: np.ndarray, cfg: UpdaterConfig,
              res: float) -> tuple[int, int]:
@@ -99,7 +113,7 @@ class FaceCounts:
             return 0, 0
         if getattr(self, "_small", None) is None:       # once per reference map
             self._small = small_structure_bits(ref, cfg.face_max_area, res)
-        planes = (self.now, self.confirmed, self.candidates, self._small)
+        planes = (self.now, self.crossed, self.confirmed, self.candidates, self._small)
         return kernels().move_faces(ref, out, (self.hits, self.passes, self.behind), planes,
                                     cfg.face_band, cfg.face_min_passes, cfg.face_free_ratio,
                                     cfg.face_min_hits, cfg.face_draw_ratio,

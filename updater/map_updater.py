@@ -356,6 +356,10 @@ class MapUpdater:
             self._faces.move(self._ref, cells, self.config, self._res)
         return OccupancyGrid(cells, self._res, self._origin)
 
+    def face_cells(self) -> int:
+        """Cells the faces rule holds counts for, carried or this session's."""
+        return self._faces.cells
+
     def carried_faces(self) -> FaceCounts:
         """What the next session's updater starts from (``faces=``): the counts of the faces
         rule (``UpdaterConfig.move_faces``), halved, and the cells it would move now. Empty
@@ -453,7 +457,8 @@ class MapUpdater:
         arrays = {"reference": self._ref, "hist": self._hist, "hits": self._hits.dense(),
                   "seen": self._seen, "face_hits": self._faces.hits,
                   "face_passes": self._faces.passes, "face_behind": self._faces.behind,
-                  "face_now": self._faces.now, "face_confirmed": self._faces.confirmed}
+                  "face_now": self._faces.now, "face_confirmed": self._faces.confirmed,
+                  "face_crossed": self._faces.crossed}
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
                 "gate": self._gate.state(), "counts": self._counts,
@@ -533,6 +538,9 @@ class MapUpdater:
                 keys = ("face_hits", "face_passes", "face_behind", "face_now", "face_confirmed")
                 faces = FaceCounts(*(z[k] for k in keys)) if set(keys) <= set(z.files) \
                     else None
+                # ... and before the crossed plane, none: freed once crossed again
+                if faces is not None and "face_crossed" in z.files:
+                    faces.crossed = z["face_crossed"]
         except FileInputError as e:
             raise UpdaterError(str(e)) from None
         # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
@@ -554,7 +562,8 @@ class MapUpdater:
             "face_passes": None if faces is None else faces.passes,
             "face_behind": None if faces is None else faces.behind,
             "face_now": None if faces is None else faces.now,
-            "face_confirmed": None if faces is None else faces.confirmed})
+            "face_confirmed": None if faces is None else faces.confirmed,
+            "face_crossed": None if faces is None else faces.crossed})
         config = UpdaterConfig.from_dict(meta["config"], source=str(path))
         try:
             grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))

@@ -24,7 +24,8 @@ ARRAYS = {"reference": "reference map", "hist": "buffers", "hits": "hit buffers"
           "seen": "flag counts", "face_hits": "face hit counts",
           "face_passes": "face crossing counts", "face_behind": "face behind counts",
           "face_now": "face hits of the session",
-          "face_confirmed": "faces the last session would have moved"}
+          "face_confirmed": "faces the last session would have moved",
+          "face_crossed": "face crossings of the session"}
 _BLOCK = 1 << 20           # cells per block of the flag check
 
 

@@ -16,6 +16,7 @@ import pytest
 
 from gridmap import load_map
 from mapupdate import main
+from updater import MapUpdater
 
 import ros1_tools
 
@@ -98,14 +99,24 @@ def test_latched_map_updated_is_a_valid_grid_of_the_maps_size_and_origin(realtim
 
 def test_commit_makes_the_next_session_start_from_the_updated_map_and_reset_clears(
         realtime, ros, bags, tmp_path):
+    # the commit starts the next session as `mapupdate update --state` chains them: the
+    # faces rule's counts of W2 carried, halved (none with the profile's poses taken as given;
+    # the ROS 2 node's test carries some)
+    state = tmp_path / "chain.npz"
+    update(bags, bags / "run/maps/M_W1.yaml", bags / "bags/W2.bag", tmp_path / "w2_off.yaml",
+           "--state", str(state))
+    carried = MapUpdater.load(state).carried_faces().cells
     assert "success: True" in ros.call("/map_updater/commit")
+    diag = ros.health("map_updater", tmp_path / "c.json")
+    assert int(diag["face_cells_carried"]) == carried
     w2 = tmp_path / "w2.yaml"
     from gridmap import save_map
     save_map(load_map(realtime["save"]), w2)
     ros.play(bags / "bags/W3.bag", rate=5.0)
     time.sleep(1.0)
     after_w3 = saved(ros, realtime["save"])
-    expected = update(bags, w2, bags / "bags/W3.bag", tmp_path / "w3.yaml")
+    expected = update(bags, w2, bags / "bags/W3.bag", tmp_path / "w3.yaml", "--state",
+                      str(state), "--new-session")
     assert (expected != load_map(w2).data).sum() > 100
     diag = ros.health("map_updater", tmp_path / "d.json")
     if diag.get("scans_dropped_behind", "0") == "0":
@@ -115,6 +126,7 @@ def test_commit_makes_the_next_session_start_from_the_updated_map_and_reset_clea
     # reset: the buffers restart on the committed reference, the session's changes are gone
     assert "success: True" in ros.call("/map_updater/reset")
     assert np.array_equal(saved(ros, realtime["save"]), load_map(w2).data)
+    assert ros.health("map_updater", tmp_path / "r.json")["face_cells_carried"] == "0"
     ros.stop(realtime["node"])
 
 

@@ -14,8 +14,9 @@ import time
 import numpy as np
 import pytest
 
-from gridmap import load_map
+from gridmap import load_map, save_map
 from mapupdate import main
+from updater import MapUpdater
 
 import ros2_tools
 
@@ -292,6 +293,47 @@ def test_reset_and_commit_do_what_they_say(replayed, graph, recording):
     assert graph.call(f"{NODE}/commit")["success"]             # now the reference
     assert graph.call(f"{NODE}/save")["success"]
     assert np.array_equal(load_map(save).data, reference)
+
+
+@needs_tf
+def test_commit_carries_the_faces_counts_as_update_state_does_and_reset_clears_them(
+        graph, recording, tmp_path):
+    # the faces rule counts scans the pose check placed: with poses given on /tf, only with
+    # pose_check.refine_given. In a graph of its own: the other nodes would hear this replay
+    config = tmp_path / "refine.yaml"
+    config.write_text("pose_check:\n  refine_given: true\n")
+    state = tmp_path / "W2.state.npz"
+    assert main(["update", "--map", str(recording / "run/maps/M_W1.yaml"), "--log",
+                 str(recording / "bags/W2.bag"), "--out", str(tmp_path / "u.yaml"), "--state",
+                 str(state), "--config", str(config), "--no-progress"]) == 0
+    carried = MapUpdater.load(state).carried_faces().cells
+    assert carried > 1000
+    own = ros2_tools.Graph(tmp_path, other_than=graph)
+    name = "carrier"
+    try:
+        got = _replay_and_save(own, recording, name, "tf", "-p",
+                               "pose_check.refine_given:=true")
+        assert np.array_equal(got["saved"], load_map(tmp_path / "u.yaml").data)
+        assert own.call(f"/{name}/commit")["success"]          # the next session
+        assert int(health(own, name)["face_cells_carried"]) == carried
+        assert own.call(f"/{name}/reset")["success"]
+        assert int(health(own, name)["face_cells_carried"]) == 0
+        # killed, then started on the map it saved (a copy, as map_server would serve it):
+        # the next session after the saved one, its counts carried, its saves written over
+        ros2_tools.os.killpg(got["node"].pid, ros2_tools.signal.SIGKILL)
+        today = tmp_path / "today.yaml"
+        save_map(load_map(own.folder / f"{name}.yaml"), today)
+        again = own.node("--map", today, "--autostart", "--ros-args", "-r", f"__node:={name}",
+                         "-p", f"save_path:={own.folder / f'{name}.yaml'}", "-p",
+                         "pose_check.refine_given:=true", name=name)
+        own.wait_for_service(f"/{name}/get_state", timeout=180)
+        values = health(own, name)
+        assert int(values["face_cells_carried"]) == carried and "resumed" not in values
+        assert own.call(f"/{name}/save")["success"]
+        assert np.array_equal(load_map(own.folder / f"{name}.yaml").data, got["saved"])
+        assert own.stop(again) == 0
+    finally:
+        own.close()
 
 
 LIFECYCLE = """

@@ -31,7 +31,7 @@ from localization.confidence import PoseCheck
 from localization.smoothing import PoseSmoother
 from robotlogs.rosbag import transform_pose
 
-from ..methods import make_method
+from ..methods import face_cells, make_method, next_session
 from ..pipeline import RobotPipeline, warm_up
 from ..robot_config import load_robot_config
 from ..ros_common.gaps import Gaps
@@ -88,21 +88,24 @@ class MapUpdaterNode:
             self._adopt(reference)
 
     # --- the map ------------------------------------------------------------------------------
-    def _adopt(self, reference: OccupancyGrid) -> None:
-        """Start afresh on ``reference``: new buffers, a new pose check (lock held or not
-        needed)."""
-
-        self.pipeline = self._pipeline_on(reference)
+    def _adopt(self, reference: OccupancyGrid, carry: bool = True) -> None:
+        """The next session on ``reference``: new buffers, a new pose check, with what the
+        last session carries (the faces rule's counts, halved) when ``carry`` and the map is
+        in its frame (lock held or not needed)."""
+        last = self.pipeline.updater if carry and self.pipeline is not None else None
+        updater = next_session(self.settings.method, last, reference, self.updater_config)
+        self.health.counts["face_cells_carried"] = face_cells(updater)
+        self.pipeline = self._pipeline_on(reference, updater)
         self._published = None                   # publish the new map at the next period
 
-    def _pipeline_on(self, reference: OccupancyGrid) -> RobotPipeline:
+    def _pipeline_on(self, reference: OccupancyGrid, updater=None) -> RobotPipeline:
         # the node's poses come from outside (tf, amcl_pose): refined as the profile says
         check = PoseCheck(reference, self.pose_check_config.for_poses(own_localizer=False)) \
             if self.settings.use_pose_check else None
         smoother = PoseSmoother(self.settings.smooth_poses) \
             if self.settings.smooth_poses > 0 else None
-        return RobotPipeline(make_method(self.settings.method, reference, self.updater_config),
-                             pose_check=check, smoother=smoother)
+        updater = updater or make_method(self.settings.method, reference, self.updater_config)
+        return RobotPipeline(updater, pose_check=check, smoother=smoother)
 
     def _on_map(self, msg) -> None:
         try:
@@ -366,9 +369,10 @@ class MapUpdaterNode:
         with self._lock:
             if self.pipeline is None:
                 return self.ros["TriggerResponse"](False, "no reference map yet")
-            self._adopt(self.pipeline.updater.reference_map)
+            self._adopt(self.pipeline.updater.reference_map, carry=False)
         self._publish()
-        return self.ros["TriggerResponse"](True, "buffers cleared; the reference is unchanged")
+        return self.ros["TriggerResponse"](True, "buffers and the faces rule's counts cleared; "
+                                           "the reference is unchanged")
 
     # --- wiring -------------------------------------------------------------------------------
     def start(self, subscribe_map: bool) -> None:

@@ -38,7 +38,7 @@ from localization.smoothing import PoseSmoother
 from robotlogs.records import TransformRecord
 from robotlogs.rosbag import stamp_seconds
 
-from ..methods import make_method
+from ..methods import face_cells, make_method, next_session
 from ..pipeline import RobotPipeline, warm_up
 from ..robot_config import load_robot_config
 from ..ros_common.gaps import Gaps
@@ -258,16 +258,25 @@ class MapUpdaterNode(LifecycleNode):
     # --- the map ------------------------------------------------------------------------------
     def _start_on(self, reference: OccupancyGrid) -> None:
         """The first reference: the updater this node saved before at ``save_path`` when it
-        belongs to this map and configuration (resumed), else a fresh one."""
-        resumed, self._save_refusal = services.resume(self, reference)
+        belongs to this map and configuration (resumed), or the session after it when this is
+        the map it made, else a fresh one."""
+        resumed, self._save_refusal, how = services.resume(self, reference)
         if resumed is not None:
             self.pipeline = self._pipeline_on(reference, resumed)
-            self.health.counts["resumed"] = 1
+            if how == "next session":
+                self.health.counts["face_cells_carried"] = resumed.face_cells()
+            else:
+                self.health.counts["resumed"] = 1
         else:
             self._adopt(reference)
 
-    def _adopt(self, reference: OccupancyGrid) -> None:
-        self.pipeline = self._pipeline_on(reference)
+    def _adopt(self, reference: OccupancyGrid, carry: bool = True) -> None:
+        """The next session on ``reference``: buffers afresh, with what the last session
+        carries (the faces rule's counts, halved) when ``carry`` and the map is in its frame."""
+        last = self.pipeline.updater if carry and self.pipeline is not None else None
+        updater = next_session(self.settings.method, last, reference, self.updater_config)
+        self.health.counts["face_cells_carried"] = face_cells(updater)
+        self.pipeline = self._pipeline_on(reference, updater)
         self._published = None
 
     def _pipeline_on(self, reference: OccupancyGrid, updater=None) -> RobotPipeline:

@@ -41,29 +41,40 @@ def store_link(s) -> StoreLink | None:
 
 
 def resume(node, reference: OccupancyGrid):
-    """(the updater to resume, why ``save`` refuses): the paper's updater saved at
-    ``save_path``'s state file, when it was made on this reference map with this
-    configuration; otherwise, when a map is already at ``save_path``, a refusal to write over
-    what this node did not make (a restart after a crash would lose the updated map)."""
+    """(the updater, why ``save`` refuses, how): the paper's updater saved at ``save_path``'s
+    state file when it was made on this reference map with this configuration ("resumed");
+    the session after it, buffers afresh and the faces rule's counts carried, when this
+    reference map is the map it made ("next session"); otherwise (None, ""), or, when a map
+    is already at ``save_path``, a refusal to write over what this node did not make (a
+    restart after a crash would lose the updated map)."""
     s = node.settings
     saved, state = Path(s.save_path), state_path(s.save_path)
     if s.method == "paper" and state.exists():
         try:
             updater = MapUpdater.load(state)
         except MapUpdatingError as e:
-            return None, f"{state} cannot be resumed ({' '.join(str(e).split())})"
+            return None, f"{state} cannot be resumed ({' '.join(str(e).split())})", ""
         ref = updater.reference_map
-        if ref.same_frame(reference) and (ref.data == reference.data).all() and \
-                updater.config == node.updater_config:
-            node.get_logger().info(f"resumed from {state}: the buffers of the map saved at "
-                                   f"{saved}")
-            return updater, ""
+        if ref.same_frame(reference) and updater.config == node.updater_config:
+            if (ref.data == reference.data).all():
+                node.get_logger().info(f"resumed from {state}: the buffers of the map saved at "
+                                       f"{saved}")
+                return updater, "", "resumed"
+            if (updater.updated_map().data == reference.data).all():
+                # started on the map that session made: the next session, with what it
+                # carries (as ``mapupdate update --state`` does); nothing at save_path is lost
+                nxt = MapUpdater(reference, updater.config, faces=updater.carried_faces())
+                node.get_logger().info(f"the next session after the one saved at {state}: "
+                                       f"{nxt.face_cells()} cells of the faces rule's counts "
+                                       "carried")
+                return nxt, "", "next session"
         return None, (f"{state} was saved on another reference map or configuration; "
-                      f"{saved} is not written over: move them or set another save_path")
+                      f"{saved} is not written over: move them or set another save_path"), ""
     if saved.exists():
         return None, (f"{saved} exists and this node did not make it (no state to resume "
-                      f"at {state}); it is not written over: move it or set another save_path")
-    return None, ""
+                      f"at {state}); it is not written over: move it or set another "
+                      "save_path"), ""
+    return None, "", ""
 
 
 def create(node) -> list:
@@ -143,8 +154,8 @@ def _commit(node) -> tuple[bool, str]:
 
 
 def _reset(node) -> tuple[bool, str]:
-    node._adopt(node.pipeline.updater.reference_map)
-    return True, "buffers cleared; the reference is unchanged"
+    node._adopt(node.pipeline.updater.reference_map, carry=False)
+    return True, "buffers and the faces rule's counts cleared; the reference is unchanged"
 
 
 def take_newer_version(node) -> None:

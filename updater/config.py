@@ -222,10 +222,11 @@ class UpdaterConfig:
     # Not in the paper (_faces): a face of M a few cells from where the scans see it is moved
     # there. Per cell, the processed scans whose beams end in it (hits) and those whose beams
     # cross it within face_band cells before their hit, meeting the surface they hit at
-    # face_min_sine or more (passes). At the output an occupied cell of M crossed by
-    # face_min_passes scans and ended in by at most face_free_ratio of that many is freed; a
-    # free cell of M 2 to face_band cells from M's surfaces, ended in by face_min_hits scans
-    # and crossed by at most face_draw_ratio of that many, is drawn. The counts go on from
+    # face_min_sine or more (passes). At the output an occupied cell of M crossed this
+    # session and by face_min_passes scans in all, ended in by at most face_free_ratio of that
+    # many, is freed; a free cell of M 2 to face_band cells from M's surfaces, ended in this
+    # session and by face_min_hits scans in all, crossed by at most face_draw_ratio of that
+    # many, is drawn. The counts go on from
     # session to session, halved at each new one (MapUpdater.carried_faces).
     move_faces: bool = False
     face_band: int = 4                       # [cells]

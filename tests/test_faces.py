@@ -1,6 +1,7 @@
 """The faces rule (``UpdaterConfig.move_faces``, updater/_faces.py): a face of M a few cells off
 the world's is moved to where the scans see it; walls seen from far or grazed stay."""
 
+import json
 import math
 
 import numpy as np
@@ -297,6 +298,18 @@ def test_a_saved_state_keeps_the_counts(tmp_path):
     assert np.array_equal(back._faces.passes, up._faces.passes)
     assert np.array_equal(back._faces.behind, up._faces.behind)
     assert np.array_equal(back.updated_map().data, up.updated_map().data)
+    assert np.array_equal(back._faces.crossed, up._faces.crossed) and up._faces.crossed.any()
+    # a state saved before the crossed plane (no face_crossed, nor its checksum) loads, with
+    # no crossing of its session yet
+    with np.load(tmp_path / "s.npz") as z:
+        arrays = {k: z[k] for k in z.files if k != "face_crossed"}
+    meta = json.loads(str(arrays["meta"]))
+    del meta["checksums"]["face_crossed"]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez_compressed(tmp_path / "old.npz", **arrays)
+    old = MapUpdater.load(tmp_path / "old.npz")
+    assert np.array_equal(old._faces.passes, up._faces.passes)
+    assert old._faces.crossed.shape == up._faces.crossed.shape and not old._faces.crossed.any()
 
 
 def test_only_scans_the_pose_check_placed_count_by_default():

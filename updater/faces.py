@@ -22,6 +22,11 @@ from .config import UpdaterConfig, UpdaterError
 from .steps import kernels
 
 
+# the arrays a state file holds, by their names there; face_crossed since the crossed plane
+STATE_KEYS = ("face_hits", "face_passes", "face_behind", "face_now", "face_confirmed",
+              "face_crossed")
+
+
 @dataclass
 class FaceCounts:
     hits: np.ndarray       # uint8 (H, W): scans whose beams ended in the cell (saturating)
@@ -60,6 +65,20 @@ class FaceCounts:
         return cls(carried.hits.copy(), carried.passes.copy(), carried.behind.copy(),
                    *(None if a is None else a.copy()
                      for a in (carried.now, carried.confirmed, carried.crossed)))
+
+    @classmethod
+    def from_state(cls, arrays: dict) -> FaceCounts | None:
+        """The counts of a state file's ``arrays`` (by ``STATE_KEYS``, None where the file has
+        none): None for a state saved before the faces rule; one saved before the crossed
+        plane has no crossing of its session yet (a cell is freed once crossed again)."""
+        if any(arrays[k] is None for k in STATE_KEYS[:5]):
+            return None
+        return cls(*(arrays[k] for k in STATE_KEYS))
+
+    def state_arrays(self) -> dict:
+        """The arrays ``from_state`` reads, by their names in a state file."""
+        return dict(zip(STATE_KEYS, (self.hits, self.passes, self.behind, self.now,
+                                     self.confirmed, self.crossed)))
 
     def __post_init__(self):
         self._shape = self.hits.shape

@@ -56,7 +56,7 @@ from gridmap.files import FileInputError, check_regular_file
 from . import saved_state, steps
 from ._arguments import Buffers, MapCells
 from .config import UpdaterConfig, UpdaterError
-from .faces import FaceCounts
+from .faces import STATE_KEYS as FACE_STATE_KEYS, FaceCounts
 from .gating import CONFIRMING, DIRECTION_BINS, SKIPPED_OFF_MAP, Gate
 from .hit_tiles import HitTiles
 
@@ -455,10 +455,7 @@ class MapUpdater:
         renamed, so a crash never leaves a half-written state."""
         path = Path(path)
         arrays = {"reference": self._ref, "hist": self._hist, "hits": self._hits.dense(),
-                  "seen": self._seen, "face_hits": self._faces.hits,
-                  "face_passes": self._faces.passes, "face_behind": self._faces.behind,
-                  "face_now": self._faces.now, "face_confirmed": self._faces.confirmed,
-                  "face_crossed": self._faces.crossed}
+                  "seen": self._seen, **self._faces.state_arrays()}
         meta = {"format": STATE_FORMAT, "config": self.config.to_dict(),
                 "resolution": self._res, "origin": list(self._origin),
                 "gate": self._gate.state(), "counts": self._counts,
@@ -535,12 +532,7 @@ class MapUpdater:
                 hits = z["hits"] if "hits" in z.files else None
                 seen = z["seen"] if "seen" in z.files else None
                 # states saved before the faces rule have no face counts
-                keys = ("face_hits", "face_passes", "face_behind", "face_now", "face_confirmed")
-                faces = FaceCounts(*(z[k] for k in keys)) if set(keys) <= set(z.files) \
-                    else None
-                # ... and before the crossed plane, none: freed once crossed again
-                if faces is not None and "face_crossed" in z.files:
-                    faces.crossed = z["face_crossed"]
+                face_arrays = {k: z[k] if k in z.files else None for k in FACE_STATE_KEYS}
         except FileInputError as e:
             raise UpdaterError(str(e)) from None
         # A truncated, damaged or foreign file: zipfile, zlib and numpy's header parser raise
@@ -557,13 +549,8 @@ class MapUpdater:
         if missing:
             raise UpdaterError(f"{path}: state lacks {', '.join(missing)}")
         saved_state.check_checksums(path, meta.get("checksums"), {
-            "reference": ref, "hist": hist, "hits": hits, "seen": seen,
-            "face_hits": None if faces is None else faces.hits,
-            "face_passes": None if faces is None else faces.passes,
-            "face_behind": None if faces is None else faces.behind,
-            "face_now": None if faces is None else faces.now,
-            "face_confirmed": None if faces is None else faces.confirmed,
-            "face_crossed": None if faces is None else faces.crossed})
+            "reference": ref, "hist": hist, "hits": hits, "seen": seen, **face_arrays})
+        faces = FaceCounts.from_state(face_arrays)
         config = UpdaterConfig.from_dict(meta["config"], source=str(path))
         try:
             grid = OccupancyGrid(ref, meta["resolution"], tuple(meta["origin"]))

@@ -226,8 +226,8 @@ class UpdaterConfig:
     # session and by face_min_passes scans in all, ended in by at most face_free_ratio of that
     # many, is freed; a free cell of M 2 to face_band cells from M's surfaces, ended in this
     # session and by face_min_hits scans in all, crossed by at most face_draw_ratio of that
-    # many, is drawn. The counts go on from
-    # session to session, halved at each new one (MapUpdater.carried_faces).
+    # many, is drawn. The counts go on from session to session, halved at each new one
+    # (MapUpdater.carried_faces).
     move_faces: bool = False
     face_band: int = 4                       # [cells]
     face_min_sine: float = 0.5               # sine of the angle between beam and surface

@@ -470,6 +470,17 @@ class MapUpdaterNode(LifecycleNode):
         return ", ".join(f"{k} {v}" for k, v in self.health.values(counts))
 
 
+def _spin_once(executor, timeout: float) -> None:
+    """One turn of the executor. A callback that SIGINT overtook (the context shut down
+    between the executor taking a timer and its publishing: "publisher's context is
+    invalid") ends the spinning as the shutdown does; with the context up, its error stands."""
+    try:
+        executor.spin_once(timeout_sec=timeout)
+    except Exception:  # noqa: BLE001 - rclpy's RCLError is not public
+        if rclpy.ok():
+            raise
+
+
 def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None) -> int:
     """``mapupdate ros2``: spin the lifecycle node until shut down (SIGINT, or its shutdown
     transition); with ``autostart`` (or the ``autostart`` parameter), configure and activate
@@ -495,10 +506,10 @@ def run_node(map_path=None, config_path=None, autostart: bool = False, argv=None
                     raise MapUpdatingError(f"the node did not come up: {name} failed: "
                                            f"{node.failure or 'see its log'}")
         while rclpy.ok() and node.lifecycle.state != "finalized":
-            executor.spin_once(timeout_sec=0.5)
+            _spin_once(executor, 0.5)
         end = time.monotonic() + 0.5            # the shutdown's answer on its way
         while rclpy.ok() and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.1)
+            _spin_once(executor, 0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -1,0 +1,122 @@
+"""Where the robot profile's misses lie late in a lifelong run: the targets (observable cells
+M(i-1) got wrong) that M(i) leaves wrong over the last sessions of one layout and seed of
+``bench_lifelong.py``, pooled, by what lies near them.
+
+    python benchmarks/lifelong_misses.py gen101:1 [--sessions 100] [--from 80] [--out DIR]
+
+Per kind (left to free: occupied in M(i-1), free in the truth; left to draw: free in M(i-1),
+occupied in the truth), the share within 3 cells of a wall, a rack or an object the session
+did not move (``bench_soak.standing_cells``), within 4 cells of a face (of M(i-1) for the
+cells to draw, of the truth for those to free), wrong for five sessions or more in a row, and
+new this session. The scenario is the benchmark's (written to, or read from, ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_lifelong as bl  # noqa: E402
+import bench_soak  # noqa: E402
+
+ROWS = (("within 3 cells of a wall, rack or unmoved object", "standing"),
+        ("within 4 cells of a face", "face"),
+        ("wrong 5 sessions or more in a row", "old"),
+        ("new this session", "new"))
+
+
+def grown(mask: np.ndarray, cells: int) -> np.ndarray:
+    from gridmap.masks import near
+
+    for _ in range(cells):
+        mask = near(mask)
+    return mask
+
+
+def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
+    """Counts, pooled over sessions ``first``..n, of the targets left wrong, by kind and by
+    what lies near them."""
+    import evaluation as ev
+    from gridmap import FREE, OCCUPIED
+    from scenarios import runner
+    from scenarios.session import session_seeds
+
+    if not bl.scenario_path(out_dir, layout, seed, n).exists():
+        bl.make_scenario((layout, seed, n, str(out_dir)))
+    scn, _ = bl.load_scenario(out_dir, layout, seed, n)
+    seeds = session_seeds(scn.seed, len(scn.sessions))
+    m1 = runner.build_initial_map(scn, 0, seeds[0]).updated
+    options = runner.RunOptions(progress=False, compare_paper=False,
+                                **bl.method_options("robot"))
+    counts = {kind: dict.fromkeys(["targets", "left"] + [k for _, k in ROWS], 0)
+              for kind in ("free", "draw")}
+    previous, faces, age = m1, None, np.zeros(m1.shape, np.int32)
+    for i in range(1, len(scn.sessions)):
+        res = runner.run_update_session(scn, i, previous, m1, seeds[i], options, faces)
+        truth, updated = res.truth.data, res.updated.data
+        wrong_occ, wrong_free = ev.wrong_cells(previous, res.truth)
+        observable = res.masks["observable"]
+        age = np.where((wrong_occ | wrong_free) & observable, age + 1, 0)
+        if i >= first:
+            standing = grown(bench_soak.standing_cells(scn, i, res.truth)
+                             & (truth == OCCUPIED), 3)
+            for kind, target, fixed, face in (
+                    ("free", wrong_occ & observable, updated == FREE, truth == OCCUPIED),
+                    ("draw", wrong_free & observable, ev.near(updated == OCCUPIED),
+                     previous.data == OCCUPIED)):
+                left = target & ~fixed
+                c = counts[kind]
+                c["targets"] += int(target.sum())
+                c["left"] += int(left.sum())
+                c["standing"] += int((left & standing).sum())
+                c["face"] += int((left & grown(face, 4)).sum())
+                c["old"] += int((left & (age >= 5)).sum())
+                c["new"] += int((left & (age == 1)).sum())
+        previous, faces = res.updated, res.faces
+        print(f"  {res.name}", end="\r", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    return counts
+
+
+def print_table(counts: dict) -> None:
+    print("| of the cells left wrong | to free | to draw |")
+    print("|---|---|---|")
+    print(f"| targets / left wrong | {counts['free']['targets']} / {counts['free']['left']} | "
+          f"{counts['draw']['targets']} / {counts['draw']['left']} |")
+    for label, key in ROWS:
+        cells = [f"{counts[k][key]} ({100 * counts[k][key] / max(1, counts[k]['left']):.0f} %)"
+                 for k in ("free", "draw")]
+        print(f"| {label} | {cells[0]} | {cells[1]} |")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("run", metavar="LAYOUT:SEED", help="e.g. gen101:1")
+    p.add_argument("--sessions", type=int, default=100)
+    p.add_argument("--from", dest="first", type=int, default=None,
+                   help="the first session pooled (default: the last fifth)")
+    p.add_argument("--out", type=Path, default=Path("runs/lifelong"))
+    args = p.parse_args(argv)
+    layout, _, seed = args.run.partition(":")
+    if not (layout == "builtin" or layout.startswith("gen") and layout[3:].isdigit()) \
+            or not seed.isdigit():
+        p.error(f"LAYOUT:SEED expected (builtin or gen<seed>, a whole number), got "
+                f"{args.run!r}")
+    if not 2 <= args.sessions <= 1000:
+        p.error(f"--sessions must be 2-1000, got {args.sessions}")
+    first = args.first if args.first is not None else args.sessions - args.sessions // 5
+    if not 1 <= first <= args.sessions:
+        p.error(f"--from must be 1-{args.sessions}, got {first}")
+    if args.out.exists() and not args.out.is_dir():
+        p.error(f"--out {args.out} is a file")
+    (args.out / "scenarios").mkdir(parents=True, exist_ok=True)
+    print_table(misses(layout, int(seed), args.sessions, first, args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -233,11 +233,21 @@ def make_scenario(job) -> str:
     return f"{path.name}: {time.perf_counter() - t0:.0f} s, changes {tally}"
 
 
+class ScenarioFileError(Exception):
+    """A scenario file of ``--out`` that cannot be read."""
+
+
 def load_scenario(out_dir, layout: str, seed: int, n: int):
     import sim
 
-    data = json.loads(scenario_path(out_dir, layout, seed, n).read_text())
-    return sim.scenario_from_dict(data["tree"], f"lifelong-{layout}"), data["what"]
+    path = scenario_path(out_dir, layout, seed, n)
+    try:
+        data = json.loads(path.read_text())
+        return sim.scenario_from_dict(data["tree"], f"lifelong-{layout}"), data["what"]
+    except Exception as e:  # noqa: BLE001 - whatever is wrong with it, the file is damaged
+        raise ScenarioFileError(f"{path}: not a readable lifelong scenario "
+                                f"({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
+                                "delete it to write it again") from None
 
 
 def run_one(job) -> str:
@@ -541,4 +551,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    try:
+        raise SystemExit(main())
+    except ScenarioFileError as e:
+        raise SystemExit(f"bench_lifelong.py: {e}") from None

@@ -119,4 +119,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except bl.ScenarioFileError as e:
+        sys.exit(f"lifelong_misses.py: {e}")

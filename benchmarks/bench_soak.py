@@ -247,10 +247,11 @@ class PeakMemory:
 
 
 def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | None = None,
-             updater_config=None, method: str = "paper", profile: str = "robot"
-             ) -> list[SessionRow]:
+             updater_config=None, method: str = "paper", profile: str = "robot",
+             on_session=None) -> list[SessionRow]:
     """Play W1 then every update session, chaining the maps; one row per update session.
-    ``pose_check``: None for the profile's."""
+    ``pose_check``: None for the profile's. ``on_session(i, previous, result)``, when given,
+    sees each session's M(i-1) and ``runner.SessionResult``."""
     from gridmap import FREE, OCCUPIED
     import evaluation as ev
     from scenarios import runner
@@ -299,6 +300,8 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
                                int(ghost_mask(ev.oracle_map(previous, res.truth,
                                                             res.masks["observable"]),
                                               res.truth, res.masks["people"]).sum())))
+        if on_session is not None:
+            on_session(i, previous, res)
         previous, faces = res.updated, res.faces
         last_targets = targets
         last_truth = res.truth

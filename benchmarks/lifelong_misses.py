@@ -42,43 +42,38 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
     what lies near them."""
     import evaluation as ev
     from gridmap import FREE, OCCUPIED
-    from scenarios import runner
-    from scenarios.session import session_seeds
 
     if not bl.scenario_path(out_dir, layout, seed, n).exists():
         bl.make_scenario((layout, seed, n, str(out_dir)))
-    scn, _ = bl.load_scenario(out_dir, layout, seed, n)
-    seeds = session_seeds(scn.seed, len(scn.sessions))
-    m1 = runner.build_initial_map(scn, 0, seeds[0]).updated
-    options = runner.RunOptions(progress=False, compare_paper=False,
-                                **bl.method_options("robot"))
+    scn, what = bl.load_scenario(out_dir, layout, seed, n)
     counts = {kind: dict.fromkeys(["targets", "left"] + [k for _, k in ROWS], 0)
               for kind in ("free", "draw")}
-    previous, faces, age = m1, None, np.zeros(m1.shape, np.int32)
-    for i in range(1, len(scn.sessions)):
-        res = runner.run_update_session(scn, i, previous, m1, seeds[i], options, faces)
+    age = None                  # sessions in a row each cell has been a target
+
+    def tally(i, previous, res):
+        nonlocal age
         truth, updated = res.truth.data, res.updated.data
         wrong_occ, wrong_free = ev.wrong_cells(previous, res.truth)
         observable = res.masks["observable"]
-        age = np.where((wrong_occ | wrong_free) & observable, age + 1, 0)
-        if i >= first:
-            standing = grown(bench_soak.standing_cells(scn, i, res.truth)
-                             & (truth == OCCUPIED), 3)
-            for kind, target, fixed, face in (
-                    ("free", wrong_occ & observable, updated == FREE, truth == OCCUPIED),
-                    ("draw", wrong_free & observable, ev.near(updated == OCCUPIED),
-                     previous.data == OCCUPIED)):
-                left = target & ~fixed
-                c = counts[kind]
-                c["targets"] += int(target.sum())
-                c["left"] += int(left.sum())
-                c["standing"] += int((left & standing).sum())
-                c["face"] += int((left & grown(face, 4)).sum())
-                c["old"] += int((left & (age >= 5)).sum())
-                c["new"] += int((left & (age == 1)).sum())
-        previous, faces = res.updated, res.faces
-        print(f"  {res.name}", end="\r", file=sys.stderr, flush=True)
-    print(file=sys.stderr)
+        targets = (wrong_occ | wrong_free) & observable
+        age = np.where(targets, (0 if age is None else age) + 1, 0)
+        if i < first:
+            return
+        standing = grown(bench_soak.standing_cells(scn, i, res.truth) & (truth == OCCUPIED), 3)
+        for kind, target, fixed, face in (
+                ("free", wrong_occ & observable, updated == FREE, truth == OCCUPIED),
+                ("draw", wrong_free & observable, ev.near(updated == OCCUPIED),
+                 previous.data == OCCUPIED)):
+            left = target & ~fixed
+            c = counts[kind]
+            c["targets"] += int(target.sum())
+            c["left"] += int(left.sum())
+            c["standing"] += int((left & standing).sum())
+            c["face"] += int((left & grown(face, 4)).sum())
+            c["old"] += int((left & (age >= 5)).sum())
+            c["new"] += int((left & (age == 1)).sum())
+
+    bench_soak.run_soak(scn, what, on_session=tally, **bl.method_options("robot"))
     return counts
 
 

@@ -52,6 +52,7 @@ from .sensor import select_beams
 # Why a pose was not trusted (returned by PoseCheck.check).
 UNSURE_FIT = "pose unsure: a nearby pose fits the scan better"
 UNSURE_COVARIANCE = "pose unsure: localiser covariance too wide"
+UNSURE_LOST = "pose unsure: refused for a while, held until the scans fit the map as before"
 
 
 # The range of every number (docs/reliability.md), and of the work one check may do.
@@ -64,7 +65,8 @@ POSE_CHECK_BOUNDS = {
     "max_position_std": (0.0, 100.0), "max_yaw_std_deg": (0.0, 180.0),
     "retry_interval": (0.0, 3600.0), "polish_step": (1e-4, 0.5), "polish_step_deg": (1e-3, 10.0),
     "polish_steps": (0, 30), "refined_min_correction": (0.0, 10.0),
-    "refined_min_correction_deg": (0.0, 180.0),
+    "refined_min_correction_deg": (0.0, 180.0), "lost_after": (0.0, 3600.0),
+    "lost_release_fits": (1, 1000), "lost_fit_floor": (0.0, 1.0), "lost_fit_window": (1, 10_000),
 }
 MAX_POSES = 250_000
 # The robot profile: the keys where it differs from the paper's (the class's defaults), each
@@ -96,6 +98,10 @@ ROBOT_PROFILE = {
                                    "(0.1 m refused a third more of Acapulco's partly mapped scans)"),
     "known_ends_only": (True, "in a partly mapped place the beams into the unmapped part "
                         "tilted the fit: Acapulco's update refused 380 of 474 scans"),
+    "lost_after": (1.0, "a second of refusals is a localiser lost, not a pose a few centimetres "
+                   "off: one that slid 1.5 m along a generated warehouse's aisle (lifelong "
+                   "benchmark, gen101 seed 2, session 81) was let through again at that error, "
+                   "out of the coarse grid's reach, and its scans made 979 wrong changes"),
 }
 
 
@@ -142,6 +148,17 @@ class PoseCheckConfig:
     polish_step: float = 0.005          # [m]
     polish_step_deg: float = 0.1        # [deg]
     polish_steps: int = 5
+    # A run of refusals this long [s of scan time] (0: off) says the localiser has lost the
+    # robot, not that a pose is a few centimetres off: the check then refuses every scan until
+    # ``lost_release_fits`` fits in a row are at most as poor as the accepted scans' mean over
+    # the last ``lost_fit_window`` of them (or ``lost_fit_floor``, when that is higher), with
+    # no better pose nearby. A localiser that has slid beyond the coarse grid's reach finds
+    # none nearer the truth, and its fit is then let through; its fit stays poorer than the
+    # scans' own before the slide.
+    lost_after: float = 0.0
+    lost_release_fits: int = 3
+    lost_fit_floor: float = 0.02
+    lost_fit_window: int = 50
 
     def __post_init__(self):
         for f in fields(self):
@@ -202,6 +219,44 @@ class PoseCheckConfig:
     def from_yaml(cls, path) -> PoseCheckConfig:
         """Load from a YAML file holding the keys at the top level (or under ``pose_check:``)."""
         return config_from_yaml(cls, path, LocalizationError, "pose_check")
+
+
+class LostLatch:
+    """``PoseCheckConfig.lost_after``: after a run of refusals that long, every scan is
+    refused until the scans fit the map again as well as the accepted ones did before."""
+
+    def __init__(self, config: PoseCheckConfig):
+        self.config = config
+        self.holding = False
+        self._refusing_since: float | None = None   # [s] first refusal of the current run
+        self._fits: list[float] = []                # the last accepted scans' fits
+        self._good = 0                              # fits in a row good enough to release
+
+    def judge(self, t: float, reason: str, f: PoseFit | None, better: bool) -> str:
+        """The check's ``reason`` for the scan at time ``t`` with fit ``f`` (``better``: a
+        better pose lies nearby), or ``UNSURE_LOST`` while the latch holds."""
+        c = self.config
+        if not c.lost_after:
+            return reason
+        if reason:
+            if self._refusing_since is None or not math.isfinite(t):
+                self._refusing_since = t
+            self.holding = self.holding or t - self._refusing_since >= c.lost_after - 1e-9
+            self._good = 0
+            return reason
+        self._refusing_since = None
+        if not self.holding:
+            if f is not None:
+                self._fits = (self._fits + [f.fit])[-c.lost_fit_window:]
+            return ""
+        if f is None:
+            return UNSURE_LOST
+        bar = max(c.lost_fit_floor, float(np.mean(self._fits)) if self._fits else 0.0)
+        self._good = self._good + 1 if f.fit <= bar + 1e-9 and not better else 0
+        if self._good < c.lost_release_fits:
+            return UNSURE_LOST
+        self.holding, self._good = False, 0
+        return ""
 
 
 @dataclass(frozen=True)
@@ -281,10 +336,18 @@ class PoseCheck:
         self._refused_at: float | None = None   # [s] scan time of the refusal that holds
         self._refused_reason = ""
         self._latest: float | None = None       # [s] latest scan time seen
+        self._lost = LostLatch(c)
 
     def reset(self) -> None:
-        """Forget the refusal that holds (e.g. before a new stream of scans)."""
+        """Forget the refusal that holds and the lost latch (e.g. before a new stream of
+        scans)."""
         self._refused_at, self._refused_reason, self._latest = None, "", None
+        self._lost = LostLatch(self.config)
+
+    @property
+    def lost(self) -> bool:
+        """The check holds every scan as the localiser's being lost (``lost_after``)."""
+        return self._lost.holding
 
     def fit(self, scan: Scan, robot_pose: Pose2D, sensor_mount: Pose2D) -> PoseFit | None:
         """The fit of ``scan`` taken from ``robot_pose`` (map frame) by a lidar at
@@ -425,6 +488,7 @@ class PoseCheck:
         if held:
             return self._refused_reason, None
         reason, f = self._judge(scan, robot_pose, sensor_mount, cov, beams)
+        reason = self._lost.judge(t, reason, f, f is not None and self.better_nearby(f))
         self._refused_at, self._refused_reason = (t, reason) if reason else (None, "")
         return reason, f
 

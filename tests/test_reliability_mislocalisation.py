@@ -13,8 +13,8 @@ import pytest
 
 from gridmap import Pose2D, PoseVerdict, Scan
 from localization import LocalizationError
-from localization.confidence import (UNSURE_COVARIANCE, UNSURE_FIT, PoseCheck, PoseCheckConfig,
-                                     search_grid)
+from localization.confidence import (UNSURE_COVARIANCE, UNSURE_FIT, UNSURE_LOST, PoseCheck,
+                                     PoseCheckConfig, search_grid)
 from updater import MapUpdater, ScanStatus, UpdaterConfig, UpdaterError
 
 import synthetic_room as world
@@ -180,6 +180,56 @@ def test_in_the_updater_a_refused_pose_is_scored_once_per_retry_interval():
     # three is scored (0.0, 0.3, 0.6, ... s) and every one of them is refused and counted
     assert reasons == [UNSURE_FIT] * 20 and len(fits) == 7
     assert u.stats["skipped"] == 20 and u.stats["processed"] == 0
+
+
+# --- a long run of refusals: the localiser is lost ---------------------------------------------
+FAR = Pose2D(CENTRE.x - 1.5, CENTRE.y + 0.5, CENTRE.theta)   # beyond the coarse grid's reach
+
+
+def _verdicts(check, walls, poses, t0):
+    """The check's reasons for full scans taken at CENTRE, told at ``poses``, 0.1 s apart."""
+    return [check.check(world.full_scan(walls, CENTRE, t0 + 0.1 * k), pose, NO_MOUNT)
+            for k, pose in enumerate(poses)]
+
+
+def test_a_second_of_refusals_holds_every_scan_until_three_fits_are_as_good_as_before():
+    walls, ref = room()
+    check = PoseCheck(ref, PoseCheckConfig(lost_after=1.0))
+    assert _verdicts(check, walls, [CENTRE] * 5, 0.0) == [""] * 5     # the fits before
+    # 1.4 s of a pose 0.1 m off: scored at 0.5, 0.8, 1.1, 1.4 and 1.7 s (held between),
+    # refused each time, and lost from the fit a second after the first refusal
+    refused = _verdicts(check, walls, [OFF] * 15, 0.5)
+    assert set(refused) == {UNSURE_FIT} and check.lost
+    # the localiser back at the right pose: held, scored once per retry_interval, until the
+    # third fit in a row as good as the accepted ones before (at 2.0, 2.3 and 2.6 s)
+    back = _verdicts(check, walls, [CENTRE] * 10, 2.0)
+    assert back[:6] == [UNSURE_LOST] * 6 and back[6:] == [""] * 4 and not check.lost
+    # a pose that fits no better than the lost one, beyond the search grids: still held
+    check = PoseCheck(ref, PoseCheckConfig(lost_after=1.0))
+    _verdicts(check, walls, [CENTRE] * 5 + [OFF] * 15, 0.0)
+    assert check.lost
+    held = _verdicts(check, walls, [FAR] * 30, 2.0)
+    assert "" not in held and check.lost
+
+
+def test_refusals_shorter_than_lost_after_do_not_hold_and_zero_or_reset_ends_it():
+    walls, ref = room()
+    check = PoseCheck(ref, PoseCheckConfig(lost_after=1.0))
+    verdicts = _verdicts(check, walls, [OFF] * 8 + [CENTRE] * 4, 0.0)     # 0.7 s refused
+    assert verdicts[-1] == "" and not check.lost
+    _verdicts(check, walls, [OFF] * 15, 2.0)
+    assert check.lost
+    check.reset()
+    assert not check.lost and _verdicts(check, walls, [CENTRE], 4.0) == [""]
+    # the paper profile's check has no latch
+    check = PoseCheck(ref)
+    _verdicts(check, walls, [OFF] * 30, 0.0)
+    assert not check.lost and _verdicts(check, walls, [CENTRE], 3.5) == [""]
+    assert PoseCheckConfig.profile("robot").lost_after == 1.0
+    for bad in ({"lost_after": -1.0}, {"lost_release_fits": 0}, {"lost_fit_floor": 2.0},
+                {"lost_fit_window": 0}):
+        with pytest.raises(LocalizationError, match=next(iter(bad))):
+            PoseCheckConfig.from_dict(bad)
 
 
 # --- in the updater -------------------------------------------------------------------------------

@@ -67,6 +67,7 @@ POSE_CHECK_BOUNDS = {
     "polish_steps": (0, 30), "refined_min_correction": (0.0, 10.0),
     "refined_min_correction_deg": (0.0, 180.0), "lost_after": (0.0, 3600.0),
     "lost_release_fits": (1, 1000), "lost_fit_floor": (0.0, 1.0), "lost_fit_window": (1, 10_000),
+    "lost_fit_margin": (1.0, 100.0),
 }
 MAX_POSES = 250_000
 # The robot profile: the keys where it differs from the paper's (the class's defaults), each
@@ -150,15 +151,23 @@ class PoseCheckConfig:
     polish_steps: int = 5
     # A run of refusals this long [s of scan time] (0: off) says the localiser has lost the
     # robot, not that a pose is a few centimetres off: the check then refuses every scan until
-    # ``lost_release_fits`` fits in a row are at most as poor as the accepted scans' mean over
-    # the last ``lost_fit_window`` of them (or ``lost_fit_floor``, when that is higher), with
-    # no better pose nearby. A localiser that has slid beyond the coarse grid's reach finds
-    # none nearer the truth, and its fit is then let through; its fit stays poorer than the
-    # scans' own before the slide.
+    # ``lost_release_fits`` fits in a row are at most ``lost_fit_margin`` times the accepted
+    # scans' mean fit over the last ``lost_fit_window`` of them (or ``lost_fit_floor``, when
+    # that is higher), with no better pose nearby. A localiser that has slid beyond the coarse
+    # grid's reach finds none nearer the truth, and its fit is then let through; its fit stays
+    # poorer than the scans' own before the slide. The margin: at the right pose, half the
+    # fits lie above their mean.
     lost_after: float = 0.0
     lost_release_fits: int = 3
     lost_fit_floor: float = 0.02
     lost_fit_window: int = 50
+    lost_fit_margin: float = 1.5
+    # ... also for poses given from outside (a recording's, a node's tf); False: only for the
+    # project's own localiser's (``for_poses``). Where a partly mapped building's scans reach
+    # what the map does not know yet, a run of refusals is the map's not knowing, not a lost
+    # pose: the hold kept Acapulco's map from growing (0.976 of its new cells known and right
+    # without it, 0.930 with it)
+    lost_given: bool = False
 
     def __post_init__(self):
         for f in fields(self):
@@ -198,17 +207,18 @@ class PoseCheckConfig:
 
     def for_poses(self, own_localizer: bool) -> PoseCheckConfig:
         """This configuration for scans placed by the project's own localiser
-        (``own_localizer``) or at poses given from outside: ``refine`` off for the latter
-        unless ``refine_given``; where it refines, the check refuses from
-        ``refined_min_correction`` (``_deg``) on when that is the nearer bound."""
-        if not (own_localizer or self.refine_given):
-            return replace(self, refine=False)
-        if not self.refine:
-            return self
-        return replace(self, min_correction=min(self.min_correction,
-                                                self.refined_min_correction),
-                       min_correction_deg=min(self.min_correction_deg,
-                                              self.refined_min_correction_deg))
+        (``own_localizer``) or at poses given from outside: for the latter ``refine`` off
+        unless ``refine_given``, and ``lost_after`` off unless ``lost_given``; where it
+        refines, the check refuses from ``refined_min_correction`` (``_deg``) on when that is
+        the nearer bound."""
+        c = self if own_localizer or self.lost_given else replace(self, lost_after=0.0)
+        if not (own_localizer or c.refine_given):
+            return replace(c, refine=False)
+        if not c.refine:
+            return c
+        return replace(c, min_correction=min(c.min_correction, c.refined_min_correction),
+                       min_correction_deg=min(c.min_correction_deg,
+                                              c.refined_min_correction_deg))
 
     @classmethod
     def from_dict(cls, values: dict, source: str = "pose check config") -> PoseCheckConfig:
@@ -251,8 +261,9 @@ class LostLatch:
             return ""
         if f is None:
             return UNSURE_LOST
-        bar = max(c.lost_fit_floor, float(np.mean(self._fits)) if self._fits else 0.0)
-        self._good = self._good + 1 if f.fit <= bar + 1e-9 and not better else 0
+        bar = max(c.lost_fit_floor,
+                  c.lost_fit_margin * float(np.mean(self._fits)) if self._fits else 0.0)
+        self._good = self._good + 1 if f.fit <= bar and not better else 0
         if self._good < c.lost_release_fits:
             return UNSURE_LOST
         self.holding, self._good = False, 0

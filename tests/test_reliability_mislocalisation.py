@@ -6,6 +6,7 @@ The full table is benchmarks/bench_mislocalisation.py."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
@@ -225,9 +226,13 @@ def test_refusals_shorter_than_lost_after_do_not_hold_and_zero_or_reset_ends_it(
     check = PoseCheck(ref)
     _verdicts(check, walls, [OFF] * 30, 0.0)
     assert not check.lost and _verdicts(check, walls, [CENTRE], 3.5) == [""]
-    assert PoseCheckConfig.profile("robot").lost_after == 1.0
+    robot = PoseCheckConfig.profile("robot")
+    # the project's own localiser's poses only, unless lost_given
+    assert robot.for_poses(own_localizer=True).lost_after == 1.0
+    assert robot.for_poses(own_localizer=False).lost_after == 0.0
+    assert replace(robot, lost_given=True).for_poses(own_localizer=False).lost_after == 1.0
     for bad in ({"lost_after": -1.0}, {"lost_release_fits": 0}, {"lost_fit_floor": 2.0},
-                {"lost_fit_window": 0}):
+                {"lost_fit_window": 0}, {"lost_fit_margin": 0.5}):
         with pytest.raises(LocalizationError, match=next(iter(bad))):
             PoseCheckConfig.from_dict(bad)
 

@@ -166,6 +166,34 @@ def test_diagnostics_say_the_method_the_gates_refusals_by_rule_and_the_pending_c
     own = values["paper's own"]                 # the authors' gate; flags not counted
     assert (own["gated_by: interval"], own["gated_by: no motion"]) == ("2", "7")
     assert int(own["pending_cells"]) == pending and "pending_few_observations" not in own
+    assert "pose_check_lost" not in paper                # no pose check, nothing to hold
+
+
+def test_diagnostics_say_when_the_pose_check_holds_every_scan_as_the_localiser_lost():
+    """A second of poses a tenth of a metre off, then the right ones: /diagnostics shows the
+    hold, and that it ends once the scans fit as before."""
+    from gridmap import Pose2D
+    from localization.confidence import PoseCheck, PoseCheckConfig
+    from onboard.methods import make_method
+    from onboard.pipeline import RobotPipeline
+    from onboard.ros_common.health import Health, pipeline_values
+    from updater import UpdaterConfig
+
+    import synthetic_room as world
+
+    ref = world.rasterise(world.room_walls())
+    check = PoseCheck(ref, PoseCheckConfig.profile("robot"))
+    pipeline = RobotPipeline(make_method("paper", ref, UpdaterConfig.profile("robot")),
+                             pose_check=check)
+    lost = []
+    for k in range(60):
+        truth = Pose2D(3.0 + 0.05 * k, 5.3, 0.0)
+        told = Pose2D(truth.x + (0.3 if 10 <= k < 30 else 0.0), truth.y, truth.theta)
+        pipeline.step(world.full_scan(world.room_walls(), truth, 0.1 * k), Pose2D(0, 0, 0),
+                      odometry=truth, pose=told)
+        lost.append(dict(Health().values(pipeline_values(pipeline, "paper")))
+                    ["pose_check_lost"])
+    assert lost[:10] == ["false"] * 10 and "true" in lost[10:30] and lost[-1] == "false"
 
 
 def test_a_topic_named_twice_is_one_subscription_and_bad_names_are_refused():

@@ -45,8 +45,12 @@ def pipeline_values(pipeline, method: str) -> dict:
     """What /diagnostics shows of the pipeline: the method, its counters (the gate's refusals
     by rule in ``gated_by``) and, for the paper's updater, the cells whose evidence of change
     stayed below the threshold (``pending_cells``, of them ``pending_few_observations`` and
-    ``pending_outvoted``; counted over the whole map at each publication, as the map is)."""
+    ``pending_outvoted``; counted over the whole map at each publication, as the map is) and,
+    with a pose check, whether it holds every scan as the localiser's being lost
+    (``pose_check_lost``: ``PoseCheckConfig.lost_after``)."""
     out = {"method": method, **pipeline.counts.as_dict()}
+    if pipeline.pose_check is not None:
+        out["pose_check_lost"] = str(pipeline.pose_check.lost).lower()
     evidence = getattr(pipeline.updater, "evidence_summary", None)
     if evidence is not None:
         out.update({k: v for k, v in evidence().items() if v is not None})

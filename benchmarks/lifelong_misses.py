@@ -8,7 +8,12 @@ Per kind (left to free: occupied in M(i-1), free in the truth; left to draw: fre
 occupied in the truth), the share within 3 cells of a wall, a rack or an object the session
 did not move (``bench_soak.standing_cells``), within 4 cells of a face (of M(i-1) for the
 cells to draw, of the truth for those to free), wrong for five sessions or more in a row, and
-new this session. The scenario is the benchmark's (written to, or read from, ``--out``).
+new this session. Then the wrong changes of the same sessions (what precision counts against
+the method), by kind: cells freed that stand in the truth (of a wall, rack or unmoved object,
+of an object the session moved, or inside an object, where the truth is unknown), and cells
+drawn away from the truth's surfaces (inside an object, in free space near a surface, or
+further, and of those where a person walked). The scenario is the benchmark's (written to, or
+read from, ``--out``).
 """
 
 from __future__ import annotations
@@ -23,6 +28,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_lifelong as bl  # noqa: E402
 import bench_soak  # noqa: E402
 
+WRONG = (("freed: a wall, rack or unmoved object", "free_standing"),
+         ("freed: an object the session moved", "free_moved"),
+         ("freed: inside an object (the truth unknown)", "free_inside"),
+         ("drawn: inside an object (the truth unknown, within 3 cells of its surface)",
+          "draw_inside"),
+         ("drawn: free space within 3 cells of a surface", "draw_near"),
+         ("drawn: further", "draw_far"),
+         ("... of them where a person walked", "draw_people"))
 ROWS = (("within 3 cells of a wall, rack or unmoved object", "standing"),
         ("within 4 cells of a face", "face"),
         ("wrong 5 sessions or more in a row", "old"),
@@ -48,6 +61,7 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
     scn, what = bl.load_scenario(out_dir, layout, seed, n)
     counts = {kind: dict.fromkeys(["targets", "left"] + [k for _, k in ROWS], 0)
               for kind in ("free", "draw")}
+    counts["wrong"] = dict.fromkeys(["changes"] + [k for _, k in WRONG], 0)
     age = None                  # sessions in a row each cell has been a target
 
     def tally(i, previous, res):
@@ -59,7 +73,9 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
         age = np.where(targets, (0 if age is None else age) + 1, 0)
         if i < first:
             return
-        standing = grown(bench_soak.standing_cells(scn, i, res.truth) & (truth == OCCUPIED), 3)
+        kept = bench_soak.standing_cells(scn, i, res.truth) & (truth == OCCUPIED)
+        tally_wrong(counts["wrong"], previous.data, updated, truth, kept, res.masks["people"])
+        standing = grown(kept, 3)
         for kind, target, fixed, face in (
                 ("free", wrong_occ & observable, updated == FREE, truth == OCCUPIED),
                 ("draw", wrong_free & observable, ev.near(updated == OCCUPIED),
@@ -77,6 +93,26 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
     return counts
 
 
+def tally_wrong(c: dict, previous, updated, truth, kept, people) -> None:
+    """Add the session's wrong changes (as ``evaluation.change_detection`` judges them) to
+    ``c`` by kind; ``kept``: the truth's cells that stand where they stood."""
+    import evaluation as ev
+    from gridmap import FREE, OCCUPIED, UNKNOWN
+
+    changed = updated != previous
+    freed = changed & (updated == FREE) & (truth != FREE)
+    drawn = changed & (updated == OCCUPIED) & ~ev.near(truth == OCCUPIED)
+    near = grown(truth == OCCUPIED, 3)
+    far = drawn & ~near
+    for key, cells in (("changes", changed), ("free_standing", freed & kept),
+                       ("free_moved", freed & (truth == OCCUPIED) & ~kept),
+                       ("free_inside", freed & (truth == UNKNOWN)),
+                       ("draw_inside", drawn & near & (truth == UNKNOWN)),
+                       ("draw_near", drawn & near & (truth != UNKNOWN)),
+                       ("draw_far", far), ("draw_people", far & people)):
+        c[key] += int(cells.sum())
+
+
 def print_table(counts: dict) -> None:
     print("| of the cells left wrong | to free | to draw |")
     print("|---|---|---|")
@@ -86,6 +122,13 @@ def print_table(counts: dict) -> None:
         cells = [f"{counts[k][key]} ({100 * counts[k][key] / max(1, counts[k]['left']):.0f} %)"
                  for k in ("free", "draw")]
         print(f"| {label} | {cells[0]} | {cells[1]} |")
+    w = counts["wrong"]
+    wrong = sum(w[k] for _, k in WRONG[:-1])
+    print(f"\n| wrong changes, of {w['changes']} (precision {1 - wrong / max(1, w['changes']):.3f}) "
+          f"| cells | share |")
+    print("|---|---|---|")
+    for label, key in WRONG:
+        print(f"| {label} | {w[key]} | {100 * w[key] / max(1, wrong):.0f} % |")
 
 
 def main(argv=None) -> int:

@@ -453,9 +453,9 @@ def recordings(layout: str, seed: int, n: int, out_dir: Path) -> bool:
     run_scenario(folder / "scenario.yaml", RunOptions(out=folder / "run", progress=False,
                                                       observer=rec))
     t_run = time.perf_counter() - t0
-    # the recorded poses replayed as the run placed them: refined by the pose check as the
-    # run's own localiser's were, and not smoothed
-    (folder / "config.yaml").write_text("pose_check:\n  refine_given: true\n")
+    # the recorded poses replayed as the run placed them: refined and held by the pose check
+    # as the run's own localiser's were, and not smoothed
+    (folder / "config.yaml").write_text("pose_check:\n  refine_given: true\n  lost_given: true\n")
     state, previous = folder / "life.npz", folder / "run" / "maps" / "M_W1.yaml"
     state.unlink(missing_ok=True)
     names = [s["name"] for s in tree["sessions"][1:]]

@@ -40,9 +40,9 @@ def test_replay_of_recorded_localisation_gives_the_in_process_map(bag_run, fmt, 
     out = tmp_path / "replayed.yaml"
     # the run is the robot profile's: its pose check placed the localiser's poses where they
     # fit, so the replay of those poses asks the check to do the same with a log's poses
-    # (which the profile takes as given); the localiser's map -> odom moves only at its
-    # filter updates, so update smooths nothing
-    check = PoseCheckConfig.profile("robot", {"refine_given": True})
+    # (which the profile takes as given), and to hold them as it did after a run of refusals;
+    # the localiser's map -> odom moves only at its filter updates, so update smooths nothing
+    check = PoseCheckConfig.profile("robot", {"refine_given": True, "lost_given": True})
     summary = update_from_log(root / "run" / "maps" / "M_W1.yaml", LogSource(bag), Outputs(out),
                               Placement(pose_check_config=check))
     assert summary["pose_source"] == "recorded" and summary["scans_corrected_by_pose_check"] > 0
@@ -137,8 +137,8 @@ def test_sessions_replayed_one_recording_each_with_the_state_carried_give_the_ch
     run_scenario(None, RunOptions(out=tmp_path / "run", quick=True, sessions=4, progress=False,
                                   observer=rec, updater_config=config))
     maps = tmp_path / "run" / "maps"
-    (tmp_path / "cfg.yaml").write_text("pose_check:\n  refine_given: true\nupdater:\n"
-                                       "  move_faces: true\n")
+    (tmp_path / "cfg.yaml").write_text("pose_check:\n  refine_given: true\n  lost_given: true\n"
+                                       "updater:\n  move_faces: true\n")
     state, previous, sizes = tmp_path / "life.npz", maps / "M_W1.yaml", []
     for name in ("W2", "W3", "W4"):
         out = tmp_path / f"{name}.yaml"

@@ -67,7 +67,7 @@ POSE_CHECK_BOUNDS = {
     "polish_steps": (0, 30), "refined_min_correction": (0.0, 10.0),
     "refined_min_correction_deg": (0.0, 180.0), "lost_after": (0.0, 3600.0),
     "lost_release_fits": (1, 1000), "lost_fit_floor": (0.0, 1.0), "lost_fit_window": (1, 10_000),
-    "lost_fit_margin": (1.0, 100.0),
+    "lost_fit_margin": (1.0, 100.0), "lost_refusals": (1, 1000),
 }
 MAX_POSES = 250_000
 # The robot profile: the keys where it differs from the paper's (the class's defaults), each
@@ -149,9 +149,11 @@ class PoseCheckConfig:
     polish_step: float = 0.005          # [m]
     polish_step_deg: float = 0.1        # [deg]
     polish_steps: int = 5
-    # A run of refusals this long [s of scan time] (0: off) says the localiser has lost the
-    # robot, not that a pose is a few centimetres off: the check then refuses every scan until
-    # ``lost_release_fits`` fits in a row are at most ``lost_fit_margin`` times the accepted
+    # A run of refusals this long [s of scan time] (0: off), and of ``lost_refusals`` verdicts
+    # at least (a log that keeps a scan a metre has two a second apart), says the localiser
+    # has lost the robot, not that a pose is a few centimetres off: the check then refuses
+    # every scan until ``lost_release_fits`` fits in a row are at most ``lost_fit_margin``
+    # times the accepted
     # scans' mean fit over the last ``lost_fit_window`` of them (or ``lost_fit_floor``, when
     # that is higher), with no better pose nearby. A localiser that has slid beyond the coarse
     # grid's reach finds none nearer the truth, and its fit is then let through; its fit stays
@@ -162,6 +164,7 @@ class PoseCheckConfig:
     lost_fit_floor: float = 0.02
     lost_fit_window: int = 50
     lost_fit_margin: float = 1.5
+    lost_refusals: int = 3
     # ... also for poses given from outside (a recording's, a node's tf); False: only for the
     # project's own localiser's (``for_poses``). Where a partly mapped building's scans reach
     # what the map does not know yet, a run of refusals is the map's not knowing, not a lost
@@ -239,6 +242,7 @@ class LostLatch:
         self.config = config
         self.holding = False
         self._refusing_since: float | None = None   # [s] first refusal of the current run
+        self._refusals = 0                          # fits refused in the current run
         self._fits: list[float] = []                # the last accepted scans' fits
         self._good = 0                              # fits in a row good enough to release
 
@@ -250,8 +254,10 @@ class LostLatch:
             return reason
         if reason:
             if self._refusing_since is None or not math.isfinite(t):
-                self._refusing_since = t
-            self.holding = self.holding or t - self._refusing_since >= c.lost_after - 1e-9
+                self._refusing_since, self._refusals = t, 0
+            self._refusals += 1
+            self.holding = self.holding or (t - self._refusing_since >= c.lost_after - 1e-9
+                                            and self._refusals >= c.lost_refusals)
             self._good = 0
             return reason
         self._refusing_since = None

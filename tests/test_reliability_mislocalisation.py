@@ -222,6 +222,14 @@ def test_refusals_shorter_than_lost_after_do_not_hold_and_zero_or_reset_ends_it(
     assert check.lost
     check.reset()
     assert not check.lost and _verdicts(check, walls, [CENTRE], 4.0) == [""]
+    # two refusals a second apart (a log that keeps a scan a metre) do not hold; a third does
+    check = PoseCheck(ref, PoseCheckConfig(lost_after=1.0))
+    assert _verdicts(check, walls, [CENTRE], 0.0) == [""]
+    for t in (1.0, 2.1):
+        assert check.check(world.full_scan(walls, CENTRE, t), OFF, NO_MOUNT) == UNSURE_FIT
+    assert not check.lost
+    assert check.check(world.full_scan(walls, CENTRE, 3.2), OFF, NO_MOUNT) == UNSURE_FIT
+    assert check.lost
     # the paper profile's check has no latch
     check = PoseCheck(ref)
     _verdicts(check, walls, [OFF] * 30, 0.0)
@@ -232,7 +240,7 @@ def test_refusals_shorter_than_lost_after_do_not_hold_and_zero_or_reset_ends_it(
     assert robot.for_poses(own_localizer=False).lost_after == 0.0
     assert replace(robot, lost_given=True).for_poses(own_localizer=False).lost_after == 1.0
     for bad in ({"lost_after": -1.0}, {"lost_release_fits": 0}, {"lost_fit_floor": 2.0},
-                {"lost_fit_window": 0}, {"lost_fit_margin": 0.5}):
+                {"lost_fit_window": 0}, {"lost_fit_margin": 0.5}, {"lost_refusals": 0}):
         with pytest.raises(LocalizationError, match=next(iter(bad))):
             PoseCheckConfig.from_dict(bad)
 

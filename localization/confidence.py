@@ -36,6 +36,7 @@ pass over a log, a new session with the same check) ends the hold; ``reset`` end
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass, fields, replace
 
@@ -243,7 +244,7 @@ class LostLatch:
         self.holding = False
         self._refusing_since: float | None = None   # [s] first refusal of the current run
         self._refusals = 0                          # fits refused in the current run
-        self._fits: list[float] = []                # the last accepted scans' fits
+        self._fits = collections.deque(maxlen=config.lost_fit_window)  # last accepted fits
         self._good = 0                              # fits in a row good enough to release
 
     def judge(self, t: float, reason: str, f: PoseFit | None, better: bool) -> str:
@@ -263,7 +264,7 @@ class LostLatch:
         self._refusing_since = None
         if not self.holding:
             if f is not None:
-                self._fits = (self._fits + [f.fit])[-c.lost_fit_window:]
+                self._fits.append(f.fit)
             return ""
         if f is None:
             return UNSURE_LOST

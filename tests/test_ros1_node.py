@@ -57,7 +57,7 @@ def realtime(ros, bags, tmp_path_factory):
     folder = tmp_path_factory.mktemp("realtime")
     save = folder / "saved.yaml"
     node = ros.node("--map", str(bags / "run/maps/M_W1.yaml"), f"_save_path:={save}",
-                    "_publish_period:=0.5")
+                    "_publish_period:=0.5", "_tf_timeout:=1.0")    # a loaded machine's late tf
     ros.play(bags / "bags/W2.bag", rate=1.0)
     time.sleep(1.0)
     grid = ros.grid("/map_updated", folder / "grid.json")

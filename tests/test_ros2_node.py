@@ -107,7 +107,10 @@ def _start(graph, recording, name: str, *params):
 def _replay_and_save(graph, recording, name: str, poses: str, *params, listen=False,
                      play=()) -> dict:
     save = graph.folder / f"{name}.yaml"
-    node = _start(graph, recording, name, *params, "-p", f"save_path:={save}")
+    # a scan waits up to tf_timeout for odometry that a loaded machine delivers late, then is
+    # placed without it; a second rather than 0.2 s keeps the replay's map the offline one there
+    node = _start(graph, recording, name, "-p", "tf_timeout:=1.0", *params, "-p",
+                  f"save_path:={save}")
     listener = None
     if listen:
         listener = graph.start(["-c", UPDATES_LISTENER, graph.folder / f"{name}-costmap"],

@@ -255,13 +255,18 @@ def hit_surface_cells(data, hits, verdict) -> set[int]:
     return cells
 
 
-def unknown_hit_cells(data, enclosed, hits, verdict) -> set[int]:
-    """The growth into the unknown: the hit cells of valid beams in open unknown space."""
+def unknown_hit_cells(data, enclosed, hits, verdict, clear: bool = False) -> set[int]:
+    """The growth into the unknown: the hit cells of valid beams in open unknown space (with
+    ``clear``, none whose 3 x 3 square holds an occupied cell of M)."""
     cells = set()
     for (x, y), v in zip(hits, verdict):
         idx = hit_cell(data, x, y) if v != INVALID else None
-        if idx is not None and open_unknown(data, enclosed, idx):
-            cells.add(idx)
+        if idx is None or not open_unknown(data, enclosed, idx):
+            continue
+        row, col = divmod(idx, data.shape[1])
+        if clear and (data[max(row - 1, 0):row + 2, max(col - 1, 0):col + 2] == OCCUPIED).any():
+            continue
+        cells.add(idx)
     return cells
 
 
@@ -282,7 +287,8 @@ def scan_flags(data, enclosed, beams, cfg: UpdaterConfig, res: float):
     if radius > 0 and (beams.changes or grow):
         guarded = seen_surfaces(data, enclosed, hits, verdict, radius,
                                 min(radius, 1.0) if grow else radius)
-    hit = unknown_hit_cells(data, enclosed, hits, verdict) if grow else set()
+    hit = unknown_hit_cells(data, enclosed, hits, verdict, cfg.grow_clear_of_surfaces) \
+        if grow else set()
     changed = set(removed_obstacle_cells(data, sensor, hits, beams.removed_reach, select))
     changed |= set(new_obstacle_cells(data, hits, beams.tol, verdict))
     if grow:

@@ -85,3 +85,48 @@ def test_hit_buffers_are_saved_and_loaded_with_the_state(tmp_path):
     loaded = MapUpdater.load(tmp_path / "s.npz")
     assert np.array_equal(loaded.updated_map().data, updater.updated_map().data)
     assert len(loaded.drawn_cells()[0]) == len(updater.drawn_cells()[0]) > 100
+
+
+def _thin_faced_room():
+    """M of the room with its right wall one cell thick and open unknown space behind it, and
+    its upper right corner unknown (x 7-10.55 m, y 7-10.5 m)."""
+    walls = world.room_walls()
+    ref = world.rasterise(walls)
+    ref.data[:, int(round(10.55 / world.RES)):] = UNKNOWN
+    ref.data[int(7.0 / world.RES):int(round(10.5 / world.RES)),
+             int(7.0 / world.RES):int(round(10.55 / world.RES))] = UNKNOWN
+    return walls, ref
+
+
+def _drive_shifted(config, shift=0.06):
+    """Circle the room with every pose 6 cm too far right: hits on the right wall land a cell
+    behind M's face of it."""
+    walls, ref = _thin_faced_room()
+    updater = MapUpdater(ref, config)
+    for true, _, t in world.Drive(seconds=60.0, pos_noise=0.0, yaw_noise=0.0).steps():
+        believed = Pose2D(true.x + shift, true.y, true.theta)
+        updater.process(world.full_scan(walls, true, t), believed, odometry=believed)
+    return ref.data, updater.updated_map().data
+
+
+def test_hits_beside_a_surface_of_m_do_not_thicken_it():
+    """``grow_clear_of_surfaces``: with the pose a cell off, the hits on a face of M land in
+    the open unknown space behind it. Drawn, the face grows into the wall; with the rule, no
+    cell beside an occupied cell of M is drawn, while the unknown corner's walls still are."""
+    config = UpdaterConfig(gating=False, grow_into_unknown=True)
+    ref, plain = _drive_shifted(config)
+    _, clear = _drive_shifted(UpdaterConfig(gating=False, grow_into_unknown=True,
+                                            grow_clear_of_surfaces=True))
+    occupied = ref == 100
+    beside = world.dilate(occupied, 1) & ~occupied & (ref == UNKNOWN)
+    # the cells behind the right wall's face of M, counted independently of the updater
+    behind = np.zeros_like(beside)
+    behind[int(1.0 / world.RES):int(6.5 / world.RES), int(round(10.55 / world.RES))] = True
+    assert ((plain == 100) & behind).sum() > 0.8 * behind.sum()          # thickened
+    assert not np.any((clear == 100) & beside)                           # not with the rule
+    # the walls of the unknown corner, two cells and more from M's surfaces, are drawn alike
+    corner = (ref == UNKNOWN) & ~world.dilate(occupied, 1)
+    corner[:int(7.0 / world.RES)] = False
+    corner[:, :int(7.0 / world.RES)] = False
+    assert ((plain == 100) & corner).sum() > 50
+    assert ((clear == 100) & corner).sum() >= 0.9 * ((plain == 100) & corner).sum()

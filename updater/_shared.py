@@ -121,6 +121,17 @@ def is_open_unknown(ref_flat, enclosed, idx):
     return v != FREE and v != OCCUPIED and not bit_get(enclosed, idx)
 
 
+@njit(cache=True, inline="always")
+def beside_occupied(ref, row, col):
+    """Whether one of the cell's 8-neighbours is occupied in M."""
+    height, width = ref.shape
+    for r in range(max(row - 1, 0), min(row + 2, height)):
+        for c in range(max(col - 1, 0), min(col + 2, width)):
+            if ref[r, c] == OCCUPIED and (r != row or c != col):
+                return True
+    return False
+
+
 # --- the per-beam arrays by name ----------------------------------------------------------
 @njit(cache=True, inline="always")
 def beam_rows(work):

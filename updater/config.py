@@ -58,6 +58,10 @@ ROBOT_PROFILE = {
     "grow_into_unknown": (True, "a robot's map is rarely whole: the map grows into the space "
                           "it had not seen (a hall's unknown bay: 0.85 of its surfaces drawn, "
                           "none without)"),
+    "grow_clear_of_surfaces": (True, "... but a hit beside a surface of M is that surface seen "
+                               "from a pose a little off, not a new one: drawn, it thickens "
+                               "the face into the object behind it (the lifelong warehouse: "
+                               "most of the cells drawn inside objects)"),
     "gate_min_interval": (0.0, "recordings of any density and live scanners: a new view is "
                           "what counts, not the time since the last one"),
     "gate_min_distance": (0.2, "a new view every 0.2 m (0.4 m keeps too few views of a sparse "
@@ -173,6 +177,12 @@ class UpdaterConfig:
     # become occupied by hit buffers of N_b flags and the threshold T. Without it, a partly
     # mapped place stays as unknown as M had it.
     grow_into_unknown: bool = False          # on in mapupdate update and the ROS node
+    # Not in the paper (_flags.list_unknown_hits): with grow_into_unknown, a hit in open unknown
+    # space beside an occupied cell of M (one of its 8-neighbours) gives no hit flag. It is M's
+    # surface seen from a pose a few centimetres off, as the paper draws no new obstacle within
+    # tol(r) of one; drawn, it thickens the face into the object behind it, where no beam can
+    # ever undo it.
+    grow_clear_of_surfaces: bool = False
     # Not in the paper (``skipped_as_change`` in _scan.process_scan): a beam skipped beside a
     # kept change (within n_skip of it) also walks for removed obstacles: the occupied cells
     # of M it passes through before p_th get changed flags. Such a beam pairs, within the
@@ -249,7 +259,8 @@ class UpdaterConfig:
     def __post_init__(self):
         for name in ("gating", "gate_confirm", "gate_confirm_once", "gate_turn_cover",
                      "neighbour_support", "last_check", "fill_gaps",
-                     "grow_into_unknown", "confirm_hit_surfaces", "walk_skipped_beams",
+                     "grow_into_unknown", "grow_clear_of_surfaces", "confirm_hit_surfaces",
+                     "walk_skipped_beams",
                      "spread_removed", "support_exact_state", "free_with_neighbours",
                      "removed_skip_across", "move_faces", "face_refined_only"):
             if not isinstance(getattr(self, name), bool):

@@ -255,16 +255,20 @@ def hit_surface_cells(data, hits, verdict) -> set[int]:
     return cells
 
 
-def unknown_hit_cells(data, enclosed, hits, verdict, clear: bool = False) -> set[int]:
+def unknown_hit_cells(data, enclosed, sensor, hits, verdict, clear: bool = False) -> set[int]:
     """The growth into the unknown: the hit cells of valid beams in open unknown space (with
-    ``clear``, none whose 3 x 3 square holds an occupied cell of M)."""
+    ``clear``, none with an occupied 8-neighbour in M that the beam came past: an offset that
+    points back towards the sensor)."""
     cells = set()
     for (x, y), v in zip(hits, verdict):
         idx = hit_cell(data, x, y) if v != INVALID else None
         if idx is None or not open_unknown(data, enclosed, idx):
             continue
         row, col = divmod(idx, data.shape[1])
-        if clear and (data[max(row - 1, 0):row + 2, max(col - 1, 0):col + 2] == OCCUPIED).any():
+        back = [(r, c) for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
+                if 0 <= r < data.shape[0] and 0 <= c < data.shape[1]
+                and (c - col) * (x - sensor[0]) + (r - row) * (y - sensor[1]) < 0]
+        if clear and any(data[r, c] == OCCUPIED for r, c in back):
             continue
         cells.add(idx)
     return cells
@@ -287,8 +291,8 @@ def scan_flags(data, enclosed, beams, cfg: UpdaterConfig, res: float):
     if radius > 0 and (beams.changes or grow):
         guarded = seen_surfaces(data, enclosed, hits, verdict, radius,
                                 min(radius, 1.0) if grow else radius)
-    hit = unknown_hit_cells(data, enclosed, hits, verdict, cfg.grow_clear_of_surfaces) \
-        if grow else set()
+    hit = unknown_hit_cells(data, enclosed, sensor, hits, verdict,
+                            cfg.grow_clear_of_surfaces) if grow else set()
     changed = set(removed_obstacle_cells(data, sensor, hits, beams.removed_reach, select))
     changed |= set(new_obstacle_cells(data, hits, beams.tol, verdict))
     if grow:

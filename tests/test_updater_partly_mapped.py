@@ -111,22 +111,41 @@ def _drive_shifted(config, shift=0.06):
 
 def test_hits_beside_a_surface_of_m_do_not_thicken_it():
     """``grow_clear_of_surfaces``: with the pose a cell off, the hits on a face of M land in
-    the open unknown space behind it. Drawn, the face grows into the wall; with the rule, no
-    cell beside an occupied cell of M is drawn, while the unknown corner's walls still are."""
+    the open unknown space behind it. Drawn, the face grows into the wall; with the rule, none
+    of them is, while the unknown corner's walls still are."""
     config = UpdaterConfig(gating=False, grow_into_unknown=True)
     ref, plain = _drive_shifted(config)
     _, clear = _drive_shifted(UpdaterConfig(gating=False, grow_into_unknown=True,
                                             grow_clear_of_surfaces=True))
     occupied = ref == 100
-    beside = world.dilate(occupied, 1) & ~occupied & (ref == UNKNOWN)
-    # the cells behind the right wall's face of M, counted independently of the updater
-    behind = np.zeros_like(beside)
+    # the cells just behind the right wall's face of M, below the unknown corner
+    behind = np.zeros_like(occupied)
     behind[int(1.0 / world.RES):int(6.5 / world.RES), int(round(10.55 / world.RES))] = True
+    assert np.all(ref[behind] == UNKNOWN) and np.all(np.roll(occupied, 1, axis=1)[behind])
     assert ((plain == 100) & behind).sum() > 0.8 * behind.sum()          # thickened
-    assert not np.any((clear == 100) & beside)                           # not with the rule
+    assert not np.any((clear == 100) & behind)                           # not with the rule
     # the walls of the unknown corner, two cells and more from M's surfaces, are drawn alike
     corner = (ref == UNKNOWN) & ~world.dilate(occupied, 1)
     corner[:int(7.0 / world.RES)] = False
     corner[:, :int(7.0 / world.RES)] = False
     assert ((plain == 100) & corner).sum() > 50
     assert ((clear == 100) & corner).sum() >= 0.9 * ((plain == 100) & corner).sum()
+
+
+def test_the_far_face_of_a_thin_wall_is_still_drawn():
+    """Only a cell behind a surface of M as the beam comes is left out: M knows a partition
+    two cells thick by its left cell alone (everything right of it unknown), and the beams
+    from the right that end on its right cell, beside M's cell but in front of it, draw it."""
+    walls = world.room_walls() + [world.Rect(7.6, 4.0, 7.7, 6.0)]
+    ref = world.rasterise(walls)
+    ref.data[:, int(round(7.65 / world.RES)):] = UNKNOWN
+    config = UpdaterConfig(gating=False, grow_into_unknown=True, grow_clear_of_surfaces=True)
+    updater = MapUpdater(ref, config)
+    for true, _, t in world.Drive(seconds=60.0, pos_noise=0.0, yaw_noise=0.0).steps():
+        updater.process(world.full_scan(walls, true, t), true, odometry=true)
+    out = updater.updated_map().data
+    far_face = np.zeros_like(out, dtype=bool)
+    far_face[int(4.0 / world.RES):int(6.0 / world.RES), int(round(7.65 / world.RES))] = True
+    near_face = np.roll(far_face, -1, axis=1)
+    assert np.all(ref.data[far_face] == UNKNOWN) and np.all(ref.data[near_face] == 100)
+    assert (out[far_face] == 100).mean() > 0.8

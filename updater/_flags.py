@@ -18,7 +18,7 @@ from numba import njit
 
 from gridmap.cells import FREE, OCCUPIED
 
-from ._shared import (CHANGE, INVALID, SKIPPED, UNCHANGED, beside_occupied, bit_get, clear_bits,
+from ._shared import (CHANGE, INVALID, SKIPPED, UNCHANGED, behind_occupied, bit_get, clear_bits,
                       hit_cell, is_open_unknown, set_bit, test_and_set)
 from ._walks import free_walk_skips, unknown_walks, walk_scan
 
@@ -285,12 +285,12 @@ def flag_hit_surfaces(ref, hits, verdict, marks, out, n):
 
 
 @njit(cache=True)
-def list_unknown_hits(ref, enclosed, hits, verdict, clear, hit_marks, ch_marks, out):
+def list_unknown_hits(ref, enclosed, sensor, hits, verdict, clear, hit_marks, ch_marks, out):
     """The hit cells of valid beams in open unknown space, each once (``hit_marks``), into
     ``out``; their changed-flag marks are set too, so that no walk of the scan flags the cells
-    it hits (``clear_bits`` clears them after the walks). With ``clear``, a cell beside an
-    occupied cell of M (8-neighbours) is left out: M's surface, seen from a pose a little off.
-    Returns the count."""
+    it hits (``clear_bits`` clears them after the walks). With ``clear``, a cell just behind
+    an occupied cell of M as its beam comes (an 8-neighbour on the sensor's side) is left
+    out: M's surface, seen from a pose a little off. Returns the count."""
     height, width = ref.shape
     flat = ref.reshape(-1)
     n = 0
@@ -301,7 +301,8 @@ def list_unknown_hits(ref, enclosed, hits, verdict, clear, hit_marks, ch_marks, 
         if not (0 <= row < height and 0 <= col < width):
             continue
         idx = row * width + col
-        if not is_open_unknown(flat, enclosed, idx) or clear and beside_occupied(ref, row, col):
+        if not is_open_unknown(flat, enclosed, idx) or clear and behind_occupied(
+                ref, row, col, hits[i, 0] - sensor[0], hits[i, 1] - sensor[1]):
             continue
         if test_and_set(hit_marks, idx):
             ch_marks[idx >> 3] = ch_marks[idx >> 3] | (1 << (idx & 7))
@@ -386,8 +387,9 @@ def ready_walks(cells, sensor, beams, own, removed_select, lay, st, state, work,
         n_guarded = mark_seen_surfaces(ref, enclosed, hits, verdict, guard,
                                        st.guard_radius_unknown, ch_marks, work.guarded,
                                        beams.scratch)
-    n_hits = list_unknown_hits(ref, enclosed, hits, verdict, st.grow_clear, state.hit_marks,
-                               ch_marks, work.hits_unknown) if st.grow_into_unknown else 0
+    n_hits = list_unknown_hits(ref, enclosed, sensor, hits, verdict, st.grow_clear,
+                               state.hit_marks, ch_marks,
+                               work.hits_unknown) if st.grow_into_unknown else 0
     if st.gap_clearance > 0:
         reach_past_gaps(beams.ranges, st.gap_free_margin, beams.free_reach)
     free_walk_skips(sensor, hits, beams.free_reach, verdict, UNCHANGED, spacing, lay.even_wrap,

@@ -122,12 +122,13 @@ def is_open_unknown(ref_flat, enclosed, idx):
 
 
 @njit(cache=True, inline="always")
-def beside_occupied(ref, row, col):
-    """Whether one of the cell's 8-neighbours is occupied in M."""
+def behind_occupied(ref, row, col, dx, dy):
+    """Whether an 8-neighbour of the cell on the side a beam along (dx, dy) comes from (the
+    offset's dot product with the beam's direction below 0) is occupied in M."""
     height, width = ref.shape
     for r in range(max(row - 1, 0), min(row + 2, height)):
         for c in range(max(col - 1, 0), min(col + 2, width)):
-            if ref[r, c] == OCCUPIED and (r != row or c != col):
+            if ref[r, c] == OCCUPIED and (c - col) * dx + (r - row) * dy < 0.0:
                 return True
     return False
 

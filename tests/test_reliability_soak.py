@@ -65,14 +65,14 @@ def test_memory_time_and_scores_stay_level(short_soak):
     # 0.491; before the pose check's hold after a run of refusals: 0.98, 0.975, 0.984, 0.963
     # and 0.861, 0.741, 0.759, 0.504; before a hit beside a surface of M was kept out of the
     # growth into the unknown: 0.98, 0.975, 0.989, 0.947 and 0.861, 0.741, 0.785, 0.461)
-    assert [round(r.precision, 3) for r in rows] == [0.978, 0.974, 0.983, 0.993]
-    assert [round(r.recall, 3) for r in rows] == [0.861, 0.743, 0.79, 0.436]
-    assert [r.targets for r in rows] == [180, 482, 472, 259]
+    assert [round(r.precision, 3) for r in rows] == [0.978, 0.971, 0.98, 1.0]
+    assert [round(r.recall, 3) for r in rows] == [0.861, 0.741, 0.823, 0.454]
+    assert [r.targets for r in rows] == [180, 487, 474, 249]
     # the ghosts of S05 are cells of M(i-1) the route showed and the updater left, none drawn
     # by the session: the oracle has none
     assert [(r.ghosts, r.ghosts_drawn, r.ghosts_oracle) for r in rows] == \
-        [(0, 0, 0), (0, 0, 0), (0, 0, 0), (26, 0, 0)]
+        [(0, 0, 0), (0, 0, 0), (0, 0, 0), (27, 0, 0)]
     # the robot profile keeps hit buffers for the growth into the unknown and the faces
-    # rule's counts besides the flag buffers: 2.61-2.67 MB (before the faces rule 2.15-2.20,
+    # rule's counts besides the flag buffers: 2.64-2.67 MB (before the faces rule 2.15-2.20,
     # the paper profile's 1.74-1.78)
     assert all(r.updater_state_mb < 3.0 for r in rows)

@@ -58,10 +58,11 @@ ROBOT_PROFILE = {
     "grow_into_unknown": (True, "a robot's map is rarely whole: the map grows into the space "
                           "it had not seen (a hall's unknown bay: 0.85 of its surfaces drawn, "
                           "none without)"),
-    "grow_clear_of_surfaces": (True, "... but a hit beside a surface of M is that surface seen "
-                               "from a pose a little off, not a new one: drawn, it thickens "
-                               "the face into the object behind it (the lifelong warehouse: "
-                               "most of the cells drawn inside objects)"),
+    "grow_clear_of_surfaces": (True, "... but a hit just behind a surface of M is that "
+                               "surface seen from a pose a little off: drawn, it thickens the "
+                               "face, session after session (100 sessions, 9 runs: precision "
+                               "0.966 -> 0.977, recall 0.554 -> 0.574; a partly mapped "
+                               "building's new cells known and right 0-0.05 lower)"),
     "gate_min_interval": (0.0, "recordings of any density and live scanners: a new view is "
                           "what counts, not the time since the last one"),
     "gate_min_distance": (0.2, "a new view every 0.2 m (0.4 m keeps too few views of a sparse "

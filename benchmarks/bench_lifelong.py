@@ -325,6 +325,7 @@ def summarise(run: dict) -> dict:
         "time_change": float(np.median(wall[-k:]) / np.median(wall[:k]) - 1.0),
         "memory_change": float(np.median(mem[-k:]) / np.median(mem[:k]) - 1.0),
         "peak_mb": float(mem.max()),
+        "idle_sessions": sum(1 for r in rows if r["scans_processed"] == 0),
     }
 
 
@@ -376,11 +377,16 @@ def print_tables(runs: list[dict]) -> None:
         ss = [summarise(r) for r in runs if r["method"] == method]
         if not ss:
             continue
-        m = {k: float(np.mean([s[k] for s in ss])) for k in ss[0]
+        # a run whose last fifth processed no scan has no recall there: left out of the mean
+        m = {k: float(np.nanmean([s[k] for s in ss])) for k in ss[0]
              if k not in ("standing_freed", "ghosts_drawn_median", "ghosts_oracle_median")}
         print(f"| {method} | {len(ss)} | {m['recall']:.3f} | {m['recall_trend']:+.4f} | "
               f"{m['recall_first']:.3f} / {m['recall_last']:.3f} | {m['precision']:.3f} | "
               f"{m['g_freed']:.1f} | {m['ghosts_median']:.1f} | {m['opdf_gap_last']:+.2f} |")
+    idle = [(r, summarise(r)["idle_sessions"]) for r in runs]
+    for run, n in ((r, n) for r, n in idle if n):
+        print(f"{run['layout']} seed {run['seed']}, {run['method']}: {n} sessions processed no "
+              f"scan (a pose check that refused them all)")
 
 
 def figure(runs: list[dict], path: Path) -> None:

@@ -357,8 +357,8 @@ def print_tables(runs: list[dict]) -> None:
           "(oracle - M) | APE m | s/session (last/first fifth) | peak MB (last/first) | "
           "bars missed |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for run in runs:
-        s = summarise(run)
+    summaries = [summarise(run) for run in runs]
+    for run, s in zip(runs, summaries):
         missed = [k for k, ok in bars(s).items() if not ok] if run["method"] == "robot" else []
         print(f"| {run['layout']} | {run['seed']} | {run['method']} | {s['recall']:.3f} "
               f"({s['recall_trend']:+.4f}) | {s['recall_first']:.3f} / {s['recall_last']:.3f} | "
@@ -374,19 +374,17 @@ def print_tables(runs: list[dict]) -> None:
           "| ghosts median | OPDF gap last fifth |")
     print("|---|---|---|---|---|---|---|---|---|")
     for method in dict.fromkeys(r["method"] for r in runs):
-        ss = [summarise(r) for r in runs if r["method"] == method]
-        if not ss:
-            continue
+        ss = [s for r, s in zip(runs, summaries) if r["method"] == method]
         # a run whose last fifth processed no scan has no recall there: left out of the mean
         m = {k: float(np.nanmean([s[k] for s in ss])) for k in ss[0]
              if k not in ("standing_freed", "ghosts_drawn_median", "ghosts_oracle_median")}
         print(f"| {method} | {len(ss)} | {m['recall']:.3f} | {m['recall_trend']:+.4f} | "
               f"{m['recall_first']:.3f} / {m['recall_last']:.3f} | {m['precision']:.3f} | "
               f"{m['g_freed']:.1f} | {m['ghosts_median']:.1f} | {m['opdf_gap_last']:+.2f} |")
-    idle = [(r, summarise(r)["idle_sessions"]) for r in runs]
-    for run, n in ((r, n) for r, n in idle if n):
-        print(f"{run['layout']} seed {run['seed']}, {run['method']}: {n} sessions processed no "
-              f"scan (a pose check that refused them all)")
+    for run, s in zip(runs, summaries):
+        if s["idle_sessions"]:
+            print(f"{run['layout']} seed {run['seed']}, {run['method']}: {s['idle_sessions']} "
+                  f"sessions processed no scan (a pose check that refused them all)")
 
 
 def figure(runs: list[dict], path: Path) -> None:

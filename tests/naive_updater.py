@@ -264,14 +264,19 @@ def unknown_hit_cells(data, enclosed, sensor, hits, verdict, clear: bool = False
         idx = hit_cell(data, x, y) if v != INVALID else None
         if idx is None or not open_unknown(data, enclosed, idx):
             continue
-        row, col = divmod(idx, data.shape[1])
-        back = [(r, c) for r in range(row - 1, row + 2) for c in range(col - 1, col + 2)
-                if 0 <= r < data.shape[0] and 0 <= c < data.shape[1]
-                and (c - col) * (x - sensor[0]) + (r - row) * (y - sensor[1]) < 0]
-        if clear and any(data[r, c] == OCCUPIED for r, c in back):
-            continue
-        cells.add(idx)
+        if not (clear and _behind_a_surface(data, idx, x - sensor[0], y - sensor[1])):
+            cells.add(idx)
     return cells
+
+
+def _behind_a_surface(data, idx, dx, dy) -> bool:
+    """An occupied 8-neighbour in M that a beam along (dx, dy) came past: its offset points
+    back towards the sensor."""
+    row, col = divmod(idx, data.shape[1])
+    return any(data[r, c] == OCCUPIED
+               for r in range(max(row - 1, 0), min(row + 2, data.shape[0]))
+               for c in range(max(col - 1, 0), min(col + 2, data.shape[1]))
+               if (c - col) * dx + (r - row) * dy < 0)
 
 
 # --- steps 2 and 3 for a scan -----------------------------------------------------------------

@@ -58,7 +58,7 @@ SETTINGS = np.dtype([
     ("guard_radius_unknown", np.float64),  # [grid units] ... around open unknown cells
     ("grow_into_unknown", np.bool_),  # the map grows into M's open unknown space
     ("unknown_walk_short", np.float64),  # [m] walks into unknown space stop this short of the hit
-    ("grow_clear", np.bool_),         # no hit flag beside an occupied cell of M
+    ("grow_clear", np.bool_),         # no hit flag just behind an occupied cell of M
     ("gap_clearance", np.int64),      # [cells] fill_gaps' free square, each way (0: off)
     ("gap_free_margin", np.float64),  # [m] with fill_gaps, free walks reach this short of the hit
     ("confirm_hit_surfaces", np.bool_),  # hits on M's surfaces confirm them, whatever the verdict

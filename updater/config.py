@@ -179,10 +179,10 @@ class UpdaterConfig:
     # mapped place stays as unknown as M had it.
     grow_into_unknown: bool = False          # on in mapupdate update and the ROS node
     # Not in the paper (_flags.list_unknown_hits): with grow_into_unknown, a hit in open unknown
-    # space beside an occupied cell of M (one of its 8-neighbours) gives no hit flag. It is M's
-    # surface seen from a pose a few centimetres off, as the paper draws no new obstacle within
-    # tol(r) of one; drawn, it thickens the face into the object behind it, where no beam can
-    # ever undo it.
+    # space just behind an occupied cell of M as its beam comes (an 8-neighbour on the sensor's
+    # side) gives no hit flag. It is M's surface seen from a pose a few centimetres off, as the
+    # paper draws no new obstacle within tol(r) of one; drawn, it thickens the face into the
+    # object behind it, where no beam can ever undo it.
     grow_clear_of_surfaces: bool = False
     # Not in the paper (``skipped_as_change`` in _scan.process_scan): a beam skipped beside a
     # kept change (within n_skip of it) also walks for removed obstacles: the occupied cells

@@ -240,8 +240,8 @@ class Settings:
                      cfg.virtual_to_measured_ratio, cfg.min_run, cfg.min_run_width / res,
                      cfg.n_skip, cfg.lost_fraction, cfg.walk_skipped_beams, radius,
                      unknown_guard(cfg, res), cfg.grow_into_unknown,
-                     max(cfg.seen_surface_radius, res), cfg.grow_clear_of_surfaces, gaps, cfg.fill_gaps_free_margin,
-                     cfg.confirm_hit_surfaces, mask, cfg.threshold, cfg.unanimous_min, support,
+                     max(cfg.seen_surface_radius, res), cfg.grow_clear_of_surfaces, gaps,
+                     cfg.fill_gaps_free_margin, cfg.confirm_hit_surfaces, mask, cfg.threshold, cfg.unanimous_min, support,
                      shift, full)
         return cls(res, radius, 2 * int(math.ceil(radius)) + 1, mask, shift, full, support,
                    record)

@@ -310,6 +310,8 @@ def summarise(run: dict) -> dict:
         # rows written before standing_freed was counted: None
         "standing_freed": int(sum(r["standing_freed"] for r in rows))
         if all("standing_freed" in r for r in rows) else None,
+        "standing_gaps": int(sum(r["standing_gaps"] for r in rows))
+        if all("standing_gaps" in r for r in rows) else None,
         "ghosts_median": float(np.median(_vals(rows, "ghosts"))),
         "ghosts": int(sum(_vals(rows, "ghosts"))),
         # rows written before the ghosts were split: None
@@ -344,6 +346,13 @@ def bars(s: dict) -> dict:
     }
 
 
+def _standing(s: dict) -> str:
+    if s["standing_freed"] is None:
+        return "n/a"
+    gaps = "" if s["standing_gaps"] is None else f"; {s['standing_gaps']}"
+    return f"{s['standing_freed']}{gaps}"
+
+
 def _split(s: dict) -> str:
     if s["ghosts_drawn_median"] is None:
         return ""
@@ -352,7 +361,8 @@ def _split(s: dict) -> str:
 
 def print_tables(runs: list[dict]) -> None:
     print("| layout | seed | method | recall (trend/session) | first / last fifth | recall on new "
-          "| precision (trend) | cells of G freed (of a wall, rack or unmoved object) | "
+          "| precision (trend) | cells of G freed (of a wall, rack or unmoved object; of them "
+          "leaving a gap) | "
           "ghosts (median/session; drawn / oracle's) | OPDF last fifth "
           "(oracle - M) | APE m | s/session (last/first fifth) | peak MB (last/first) | "
           "bars missed |")
@@ -363,7 +373,7 @@ def print_tables(runs: list[dict]) -> None:
         print(f"| {run['layout']} | {run['seed']} | {run['method']} | {s['recall']:.3f} "
               f"({s['recall_trend']:+.4f}) | {s['recall_first']:.3f} / {s['recall_last']:.3f} | "
               f"{s['recall_new']:.3f} | {s['precision']:.3f} ({s['precision_trend']:+.4f}) | "
-              f"{s['g_freed']} ({'n/a' if s['standing_freed'] is None else s['standing_freed']})"
+              f"{s['g_freed']} ({_standing(s)})"
               f" | {s['ghosts']} ({s['ghosts_median']:.0f}{_split(s)}) | "
               f"{s['opdf_last']:.2f} ({s['opdf_gap_last']:+.2f}) | {s['ape']:.3f} | "
               f"{s['wall_s']:.2f} ({100 * s['time_change']:+.0f} %) | {s['peak_mb']:.0f} "
@@ -377,7 +387,8 @@ def print_tables(runs: list[dict]) -> None:
         ss = [s for r, s in zip(runs, summaries) if r["method"] == method]
         # a run whose last fifth processed no scan has no recall there: left out of the mean
         m = {k: float(np.nanmean([s[k] for s in ss])) for k in ss[0]
-             if k not in ("standing_freed", "ghosts_drawn_median", "ghosts_oracle_median")}
+             if k not in ("standing_freed", "standing_gaps", "ghosts_drawn_median",
+                          "ghosts_oracle_median")}
         print(f"| {method} | {len(ss)} | {m['recall']:.3f} | {m['recall_trend']:+.4f} | "
               f"{m['recall_first']:.3f} / {m['recall_last']:.3f} | {m['precision']:.3f} | "
               f"{m['g_freed']:.1f} | {m['ghosts_median']:.1f} | {m['opdf_gap_last']:+.2f} |")

@@ -84,6 +84,8 @@ class SessionRow:
     g_freed: int = 0     # cells occupied in G_i that the session freed
     standing_freed: int = 0  # ... of them, cells of a wall, rack or object the session did
                              # not move
+    standing_gaps: int = 0   # ... of them with no occupied cell of M_i within one cell: a gap
+                             # in the map's outline, not a face drawn a cell off
     ghosts_drawn: int = 0    # ghosts the session drew (not occupied in M_{i-1})
     ghosts_oracle: int = 0   # ghosts of the oracle's map: left where the route never looked
 
@@ -283,6 +285,8 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
             was_occ, was_free = ev.wrong_cells(previous, last_truth)
             new &= ~(was_occ | was_free)
         n_new = int(new.sum())
+        standing_freed = (standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
+                          & (res.updated.data == FREE) & (previous.data != FREE))
         rows.append(SessionRow(res.name, moved[i - 1], mem.peak, cd["precision"], cd["recall"],
                                wall, r["updater_state_bytes"] / 2**20, r["scans_processed"],
                                cd["target_cells"], int((targets & last_targets).sum()),
@@ -292,9 +296,8 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
                                m["localization"]["previous_map"]["rmse"], m["ghost_cells"],
                                int(((res.truth.data == OCCUPIED) & (res.updated.data == FREE)
                                     & (previous.data != FREE)).sum()),
-                               int((standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
-                                    & (res.updated.data == FREE)
-                                    & (previous.data != FREE)).sum()),
+                               int(standing_freed.sum()),
+                               int(outline_gaps(standing_freed, res.updated.data).sum()),
                                int((ghost_mask(res.updated, res.truth, res.masks["people"])
                                     & (previous.data != OCCUPIED)).sum()),
                                int(ghost_mask(ev.oracle_map(previous, res.truth,
@@ -319,6 +322,16 @@ def ghost_mask(grid, truth, people: np.ndarray) -> np.ndarray:
     import evaluation as ev
 
     return (grid.data == OCCUPIED) & ~ev.near(truth.data == OCCUPIED) & people
+
+
+def outline_gaps(freed: np.ndarray, updated: np.ndarray) -> np.ndarray:
+    """Of ``freed`` (cells of what stood that a session freed), those with no occupied cell of
+    ``updated`` (M_i) within one cell: a gap in the map's outline, not a face drawn a cell off
+    (the scoring's one cell of slack)."""
+    import evaluation as ev
+    from gridmap import OCCUPIED
+
+    return freed & ~ev.near(updated == OCCUPIED)
 
 
 def standing_cells(scn, session: int, frame) -> np.ndarray:

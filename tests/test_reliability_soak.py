@@ -68,6 +68,9 @@ def test_memory_time_and_scores_stay_level(short_soak):
     assert [round(r.precision, 3) for r in rows] == [0.978, 0.971, 0.98, 1.0]
     assert [round(r.recall, 3) for r in rows] == [0.861, 0.741, 0.823, 0.454]
     assert [r.targets for r in rows] == [180, 487, 474, 249]
+    # the cells of what stood that a session freed: a gap in the map's outline only where no
+    # occupied cell of M_i is left beside them
+    assert all(0 <= r.standing_gaps <= r.standing_freed <= r.g_freed for r in rows)
     # the ghosts of S05 are cells of M(i-1) the route showed and the updater left, none drawn
     # by the session: the oracle has none
     assert [(r.ghosts, r.ghosts_drawn, r.ghosts_oracle) for r in rows] == \

@@ -53,5 +53,9 @@ def measure(ranges: np.ndarray, spec, rng: np.random.Generator | None) -> np.nda
 
 
 def make_scan(ranges: np.ndarray, spec, time: float) -> Scan:
-    return Scan(ranges, spec.angle_min, spec.angle_increment, spec.range_min, spec.range_max,
+    """A scan of ``spec`` as a ``sensor_msgs/LaserScan`` carries it: its angles and range limits
+    are float32 fields there, so a run and its recording played back see the same beams (with
+    the float64 angles, a session of a hundred played back from bags differed by a cell)."""
+    return Scan(ranges, *(float(np.float32(v)) for v in (spec.angle_min, spec.angle_increment,
+                                                          spec.range_min, spec.range_max)),
                 float(time))

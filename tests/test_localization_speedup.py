@@ -303,7 +303,10 @@ def test_filter_gives_the_same_particles_and_estimates_as_before(tour, case):
         assert updated == bool(want["updated"][k])
         assert golden.array_digest(loc.particles) == str(want["particles"][k]), f"update {k}"
         assert golden.array_digest(loc.weights) == str(want["weights"][k]), f"update {k}"
-        assert np.array_equal(est.pose.as_array(), want["pose"][k])
-        assert np.array_equal(est.cov, want["cov"][k])
-        assert est.cluster_weight == want["cluster_weight"][k]
+        # the estimate's sums are numpy's, handed to the CPU's vector units: their order, and so
+        # the last bits, differ between processors (the particles and weights above are
+        # compared bit for bit)
+        assert np.allclose(est.pose.as_array(), want["pose"][k], rtol=1e-12, atol=1e-12)
+        assert np.allclose(est.cov, want["cov"][k], rtol=1e-12, atol=0.0)
+        assert math.isclose(est.cluster_weight, want["cluster_weight"][k], rel_tol=1e-12)
     assert k + 1 == len(want["updated"])

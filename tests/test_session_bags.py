@@ -158,3 +158,24 @@ def test_sessions_replayed_one_recording_each_with_the_state_carried_give_the_ch
     from updater import MapUpdater
 
     assert MapUpdater.load(state).carried_faces().hits.max() > 0
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2"])
+def test_a_recorded_scan_has_the_angles_and_limits_the_run_gave_the_updater(bag_run, fmt):
+    """A LaserScan's angles and range limits are float32: the simulated scans carry them so,
+    and a recording read back has the very beams the run's updater and localiser saw."""
+    from robotlogs.records import ScanRecord
+    from robotlogs.rosbag import read_bag
+    from scenarios.catalog import find_scenario
+    from sim import lidar
+    from sim.scenario import load_scenario
+
+    _, ros1, ros2 = bag_run
+    spec = load_scenario(find_scenario()).robot.lidars[0]
+    run = lidar.make_scan(np.zeros(spec.beams, np.float32), spec, 0.0)
+    fields = ("angle_min", "angle_increment", "range_min", "range_max")
+    assert all(getattr(run, f) == float(np.float32(getattr(run, f))) for f in fields)
+    assert run.angle_min != -spec.fov / 2        # a float64 angle rounded, not the same
+    bag = (ros1 if fmt == "ros1" else ros2).paths["W2"]
+    scan = next(r.scan for r in read_bag(bag) if isinstance(r, ScanRecord))
+    assert [getattr(scan, f) for f in fields] == [getattr(run, f) for f in fields]

@@ -114,8 +114,9 @@ def seen_objects(scn, session: int) -> list[str]:
                          p[2] + spec.mount.theta] for p in poses])
     ok = np.isfinite(ranges)
     a = sensors[:, 2:3] + angles[None, :]
-    hits = np.column_stack([(sensors[:, 0:1] + ranges * np.cos(a))[ok],
-                            (sensors[:, 1:2] + ranges * np.sin(a))[ok]])
+    reach = np.where(ok, ranges, 0.0)  # no-return beams (inf) are dropped below
+    hits = np.column_stack([(sensors[:, 0:1] + reach * np.cos(a))[ok],
+                            (sensors[:, 1:2] + reach * np.sin(a))[ok]])
     seen = []
     for o in scn.obstacles(session):
         if not o.movable:

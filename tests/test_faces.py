@@ -158,7 +158,7 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     small = np.full_like(now, 0xFF)
     freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind),
                                         (now, crossed, now * 0, candidates, small), 4, 5, 0.1, 5,
-                                        0.34, False)
+                                        0.34, False, False)
     assert (freed, drawn) == (1, 2)
     changed = {(int(r), int(c)): int(out[r, c]) for r, c in zip(*np.nonzero(out != ref))}
     assert changed == {(2, 3): FREE, (2, 5): OCCUPIED, (6, 7): OCCUPIED}
@@ -171,13 +171,18 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     out = ref.copy()
     planes = (now, crossed, np.packbits(confirmed, bitorder="little"), candidates, small)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
-                                True) == (0, 1)
+                                True, False) == (0, 1)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
-    # a face of a large structure (a wall, a rack) stays, and nothing is drawn beside it
+    # a face of a large structure (a wall, a rack) stays, and nothing is drawn beside it ...
     out = ref.copy()
     planes = (now, crossed, now * 0, candidates, small * 0)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
-                                False) == (0, 0)
+                                False, False) == (0, 0)
+    # ... but with beside_large, in M's free space: an object set down in front of it (its
+    # unknown, the inside of a wall or a rack, stays)
+    assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
+                                False, True) == (0, 1)
+    assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
 
 
 def test_small_structures_are_those_of_a_labelling():
@@ -223,6 +228,27 @@ def test_a_face_two_cells_off_is_moved_to_where_the_scans_see_it():
     assert out[True]["old_freed"] >= out[False]["old_freed"] + 0.5, out
     assert out[True]["old_freed"] >= 0.5 and out[True]["new_drawn"] >= 0.8, out
     assert out[True]["false"] <= 2 and out[True]["walls_freed"] == 0, out
+
+
+@pytest.mark.parametrize("panel", [Rect(10.35, 4.5, 10.45, 6.5), Rect(0.55, 4.5, 0.65, 6.5)])
+def test_a_board_set_down_in_front_of_a_wall_is_drawn(panel):
+    """A board 10 cm thick, 5 cm in front of a wall that M has: its front face is 2-3 cells
+    from the wall's, within tol(r) of it, where the paper draws nothing and the rest of the
+    faces rule draws nothing beside a structure larger than ``face_max_area``. With
+    ``face_draw_beside_large`` it is drawn, and nothing else is."""
+    ref = world.rasterise(world.room_walls())
+    shapes = world.room_walls() + [panel]
+    truth = world.rasterise(shapes).data
+    face = (truth == OCCUPIED) & world.cells_of(panel) & ~world.dilate(ref.data == OCCUPIED, 1)
+    drawn = {}
+    for on in (False, True):
+        data = _drive(ref, shapes, _config(face_draw_beside_large=on)).updated_map().data
+        drawn[on] = float(world.dilate(data == OCCUPIED, 1)[face].mean())
+        assert not ((data == OCCUPIED) & (ref.data != OCCUPIED)
+                    & ~world.dilate(truth == OCCUPIED, 1)).any()
+        assert not ((data == FREE) & _walls()).any()
+    assert face.sum() >= 60
+    assert drawn[False] <= 0.1 and drawn[True] >= 0.9, drawn
 
 
 @pytest.mark.parametrize("radius, seed", [(4.4, 1), (4.7, 2), (1.5, 3)])

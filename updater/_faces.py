@@ -138,7 +138,7 @@ def _count_once(idx, counts, marks, listed, n_listed):
 
 @njit(cache=True)
 def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits, draw_ratio,
-               confirm):
+               confirm, beside_large):
     """The output (``out``, int8 (H, W), M with the other rules' changes) with the faces moved.
     ``counts``: (hits, passes, behind), uint8 (H, W) each; ``planes``: the bit planes (now,
     crossed, confirmed, candidates, small). Only faces of small structures of M (``small``:
@@ -156,7 +156,9 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
     scoring's and the map's own slack, and further than ``band`` it is the paper's new
     obstacle) and no occupied cell of M within ``band`` that is not of a small structure,
     and which a beam of this session ended in (``now``: the counts carried from
-    earlier sessions would otherwise draw again what stood there then), to be drawn. Each
+    earlier sessions would otherwise draw again what stood there then), to be drawn; with
+    ``beside_large`` a free cell of M so is drawn beside any structure (an object set down in
+    front of a wall or a rack), an unknown one still only beside small ones. Each
     candidate's bit is set in ``candidates`` (a bit plane, cleared first); with ``confirm``
     only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
     (cells freed, cells drawn)."""
@@ -177,7 +179,7 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
             elif m != OCCUPIED and out[row, col] == m and h >= min_hits and \
                     p <= draw_ratio * h and bit_get(now, idx):
                 near, all_small = _nearest_occupied(ref, small, row, col, band)
-                if 2 <= near <= band and all_small:
+                if 2 <= near <= band and (all_small or (beside_large and m == FREE)):
                     to = OCCUPIED
             if to < 0:
                 continue

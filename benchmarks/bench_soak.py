@@ -286,8 +286,9 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
             was_occ, was_free = ev.wrong_cells(previous, last_truth)
             new &= ~(was_occ | was_free)
         n_new = int(new.sum())
-        standing_freed = (standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
-                          & (res.updated.data == FREE) & (previous.data != FREE))
+        g_freed = ((res.truth.data == OCCUPIED) & (res.updated.data == FREE)
+                   & (previous.data != FREE))
+        standing_freed = g_freed & standing_cells(scn, i, res.truth)
         rows.append(SessionRow(res.name, moved[i - 1], mem.peak, cd["precision"], cd["recall"],
                                wall, r["updater_state_bytes"] / 2**20, r["scans_processed"],
                                cd["target_cells"], int((targets & last_targets).sum()),
@@ -295,9 +296,7 @@ def run_soak(scn, moved: list[str], progress: bool = True, pose_check: bool | No
                                cd["changes"],
                                mm["updated_vs_truth"]["opdf"], mm["oracle_vs_truth"]["opdf"],
                                m["localization"]["previous_map"]["rmse"], m["ghost_cells"],
-                               int(((res.truth.data == OCCUPIED) & (res.updated.data == FREE)
-                                    & (previous.data != FREE)).sum()),
-                               int(standing_freed.sum()),
+                               int(g_freed.sum()), int(standing_freed.sum()),
                                int(outline_gaps(standing_freed, res.updated.data).sum()),
                                int((ghost_mask(res.updated, res.truth, res.masks["people"])
                                     & (previous.data != OCCUPIED)).sum()),

@@ -158,7 +158,7 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     small = np.full_like(now, 0xFF)
     freed, drawn = kernels().move_faces(ref, out, (hits, passes, behind),
                                         (now, crossed, now * 0, candidates, small), 4, 5, 0.1, 5,
-                                        0.34, False, False)
+                                        0.34, False, False, 5)
     assert (freed, drawn) == (1, 2)
     changed = {(int(r), int(c)): int(out[r, c]) for r, c in zip(*np.nonzero(out != ref))}
     assert changed == {(2, 3): FREE, (2, 5): OCCUPIED, (6, 7): OCCUPIED}
@@ -171,17 +171,19 @@ def test_move_faces_frees_crossed_cells_and_draws_hit_ones_near_a_surface():
     out = ref.copy()
     planes = (now, crossed, np.packbits(confirmed, bitorder="little"), candidates, small)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
-                                True, False) == (0, 1)
+                                True, False, 5) == (0, 1)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
     # a face of a large structure (a wall, a rack) stays, and nothing is drawn beside it ...
     out = ref.copy()
     planes = (now, crossed, now * 0, candidates, small * 0)
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
-                                False, False) == (0, 0)
+                                False, False, 5) == (0, 0)
     # ... but with beside_large, in M's free space: an object set down in front of it (its
-    # unknown, the inside of a wall or a rack, stays)
+    # unknown, the inside of a wall or a rack, stays), when hit often enough for that too
     assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
-                                False, True) == (0, 1)
+                                False, True, 7) == (0, 0)
+    assert kernels().move_faces(ref, out, (hits, passes, behind), planes, 4, 5, 0.1, 5, 0.34,
+                                False, True, 6) == (0, 1)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(out != ref))} == {(2, 5)}
 
 
@@ -249,6 +251,54 @@ def test_a_board_set_down_in_front_of_a_wall_is_drawn(panel):
         assert not ((data == FREE) & _walls()).any()
     assert face.sum() >= 60
     assert drawn[False] <= 0.1 and drawn[True] >= 0.9, drawn
+
+
+def _two_sessions(ref, shapes, config, seed, **drive):
+    """M(2) after two sessions of the drive, the counts carried from the first."""
+    first = _drive(ref, shapes, config, seed=seed, **drive)
+    return _drive(first.updated_map(), shapes, config, faces=first.carried_faces(),
+                  seed=seed + 10, **drive).updated_map().data
+
+
+def test_a_board_seen_in_passing_beside_a_box_is_drawn_on_fewer_hits():
+    """A board set down 10 cm from a box that M has, passed by two short sessions: a face cell
+    is hit by a few scans a session. With the profile's ``face_min_hits`` (4) the second
+    session draws more of its face than with 5, and nothing off a true surface."""
+    box, board = Rect(8.0125, 5.0125, 8.6125, 5.6125), Rect(7.8125, 5.0125, 7.9125, 5.6125)
+    ref = world.rasterise(world.room_walls() + [box])
+    shapes = world.room_walls() + [box, board]
+    truth = world.rasterise(shapes).data
+    face = (truth == OCCUPIED) & world.cells_of(board) & ~world.dilate(ref.data == OCCUPIED, 1)
+    profile = UpdaterConfig.profile("robot").face_min_hits
+    drawn = {profile: [], 5: []}
+    for seconds, radius in ((10.0, 1.5), (6.0, 2.0)):
+        for seed in range(1, 7):
+            for hits in drawn:
+                data = _two_sessions(ref, shapes, _config(face_sessions=2, face_min_hits=hits),
+                                     seed, seconds=seconds, radius=radius)
+                drawn[hits].append(float(world.dilate(data == OCCUPIED, 1)[face].mean()))
+                assert not ((data == OCCUPIED) & (ref.data != OCCUPIED)
+                            & ~world.dilate(truth == OCCUPIED, 1)).any(), (seed, hits)
+                assert not ((data == FREE) & _walls()).any()
+    assert face.sum() >= 30
+    mean = {hits: float(np.mean(d)) for hits, d in drawn.items()}
+    assert profile == 4 and mean[4] >= 0.6 and mean[4] - mean[5] >= 0.08, mean
+
+
+def test_in_front_of_walls_a_cell_is_drawn_on_five_hits_still():
+    """Walls alone, circled by two sessions with 2 cm / 1 deg of pose noise: grazing beams'
+    hits land a cell or two in front of the walls. The profile draws there no more than with
+    5 hits everywhere (``face_large_min_hits``); with 4 there too it draws cells a cell off."""
+    ref = world.rasterise(world.room_walls())
+    off_surface = ~world.dilate(ref.data == OCCUPIED, 1)
+    drawn = {}
+    for name, keys in (("profile", {}), ("5", {"face_min_hits": 5}),
+                       ("4 everywhere", {"face_large_min_hits": 4})):
+        drawn[name] = sum(int(((_two_sessions(ref, world.room_walls(),
+                                              _config(face_sessions=2, **keys), seed,
+                                              radius=4.4, seconds=20.0) == OCCUPIED)
+                               & off_surface).sum()) for seed in (3, 5))
+    assert drawn["profile"] == drawn["5"] < drawn["4 everywhere"], drawn
 
 
 @pytest.mark.parametrize("radius, seed", [(4.4, 1), (4.7, 2), (1.5, 3)])

@@ -138,7 +138,7 @@ def _count_once(idx, counts, marks, listed, n_listed):
 
 @njit(cache=True)
 def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits, draw_ratio,
-               confirm, beside_large):
+               confirm, beside_large, large_min_hits):
     """The output (``out``, int8 (H, W), M with the other rules' changes) with the faces moved.
     ``counts``: (hits, passes, behind), uint8 (H, W) each; ``planes``: the bit planes (now,
     crossed, confirmed, candidates, small). Only faces of small structures of M (``small``:
@@ -158,7 +158,8 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
     and which a beam of this session ended in (``now``: the counts carried from
     earlier sessions would otherwise draw again what stood there then), to be drawn; with
     ``beside_large`` a free cell of M so is drawn beside any structure (an object set down in
-    front of a wall or a rack), an unknown one still only beside small ones. Each
+    front of a wall or a rack) when ended in by ``large_min_hits`` scans or more too, an
+    unknown one still only beside small ones. Each
     candidate's bit is set in ``candidates`` (a bit plane, cleared first); with ``confirm``
     only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
     (cells freed, cells drawn)."""
@@ -179,7 +180,8 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
             elif m != OCCUPIED and out[row, col] == m and h >= min_hits and \
                     p <= draw_ratio * h and bit_get(now, idx):
                 near, all_small = _nearest_occupied(ref, small, row, col, band)
-                if 2 <= near <= band and (all_small or (beside_large and m == FREE)):
+                if 2 <= near <= band and (all_small or (beside_large and m == FREE
+                                                        and h >= large_min_hits)):
                     to = OCCUPIED
             if to < 0:
                 continue

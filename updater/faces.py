@@ -137,7 +137,7 @@ class FaceCounts:
                                     cfg.face_band, cfg.face_min_passes, cfg.face_free_ratio,
                                     cfg.face_min_hits, cfg.face_draw_ratio,
                                     cfg.face_sessions > 1, cfg.face_draw_beside_large,
-                                    max(cfg.face_min_hits, cfg.face_large_min_hits))
+                                    cfg.face_large_min_hits)
 
     def decayed(self) -> FaceCounts:
         """What a new session starts from: the counts halved, and the cells the rule would

@@ -12,8 +12,10 @@ new this session. Then the wrong changes of the same sessions (what precision co
 the method), by kind: cells freed that stand in the truth (of a wall, rack or unmoved object,
 of an object the session moved, or inside an object, where the truth is unknown), and cells
 drawn away from the truth's surfaces (inside an object, in free space near a surface, or
-further, and of those where a person walked). The scenario is the benchmark's (written to, or
-read from, ``--out``).
+further, and of those where a person walked). Last, why the faces rule (docs/algorithm.md,
+"Faces a few cells off") drew none of the cells left to draw, read against the counts the
+session carried to the next (``draw_reasons``). The scenario is the benchmark's (written to,
+or read from, ``--out``).
 """
 
 from __future__ import annotations
@@ -42,6 +44,17 @@ ROWS = (("within 3 cells of a wall, rack or unmoved object", "standing"),
         ("new this session", "new"))
 
 
+# why the faces rule drew no cell within one of a cell left to draw: the first of its draw
+# conditions that no such cell meets (``draw_reasons``)
+REASONS = (("no cell within one in the rule's reach (2 to face_band cells from M's surfaces; "
+            "beside walls and racks free in M only)", "reach"),
+           ("short of hits (face_min_hits beside objects, face_large_min_hits beside walls and "
+            "racks)", "hits"),
+           ("crossed too often (more than face_draw_ratio of the hits)", "crossed"),
+           ("a candidate, waiting for the next session to agree (face_sessions 2)", "waiting"),
+           ("other (another rule's output there, or no hit this session)", "other"))
+
+
 def grown(mask: np.ndarray, cells: int) -> np.ndarray:
     from gridmap.masks import near
 
@@ -55,6 +68,7 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
     what lies near them."""
     import evaluation as ev
     from gridmap import FREE, OCCUPIED
+    from updater import UpdaterConfig
 
     if not bl.scenario_path(out_dir, layout, seed, n).exists():
         bl.make_scenario((layout, seed, n, str(out_dir)))
@@ -62,6 +76,9 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
     counts = {kind: dict.fromkeys(["targets", "left"] + [k for _, k in ROWS], 0)
               for kind in ("free", "draw")}
     counts["wrong"] = dict.fromkeys(["changes"] + [k for _, k in WRONG], 0)
+    counts["why"] = {part: dict.fromkeys(["left", "uncounted"] + [k for _, k in REASONS], 0)
+                     for part in ("standing", "away")}
+    cfg = UpdaterConfig.profile(bl.method_options("robot")["profile"])
     age = None                  # sessions in a row each cell has been a target
 
     def tally(i, previous, res):
@@ -88,9 +105,58 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
             c["face"] += int((left & grown(face, 4)).sum())
             c["old"] += int((left & (age >= 5)).sum())
             c["new"] += int((left & (age == 1)).sum())
+            if kind == "draw":
+                for part, cells in (("standing", left & standing), ("away", left & ~standing)):
+                    why = counts["why"][part]
+                    why["left"] += int(cells.sum())
+                    for key, n in draw_reasons(previous.data, cells, res.faces, cfg,
+                                               previous.resolution).items():
+                        why[key] += n
 
     bench_soak.run_soak(scn, what, on_session=tally, **bl.method_options("robot"))
     return counts
+
+
+def draw_reasons(ref: np.ndarray, left: np.ndarray, carried, cfg, resolution: float) -> dict:
+    """Why the faces rule drew none of the cells ``left`` (to draw, as scored: no occupied
+    cell of M(i) within one), each cell by the first of the rule's draw conditions that no
+    cell within one of it meets, for the reference map ``ref`` (M(i-1)'s cells) and the
+    counts the session carried (``carried``: a ``FaceCounts``, halved). The halved counts give
+    each cell's hits as at most 2h + 1 and its crossings as at least 2p, so "short of hits"
+    and "crossed too often" hold of the session's own counts too. ``{key: cells}`` over
+    ``REASONS`` and "uncounted" (no scan counted: the rule off, or poses given)."""
+    from gridmap import FREE, OCCUPIED
+    from gridmap.masks import near
+    from updater.faces import small_structure_bits
+
+    out = dict.fromkeys(["uncounted"] + [k for _, k in REASONS], 0)
+    if carried is None or carried.hits.size == 0:
+        out["uncounted"] = int(left.sum())
+        return out
+    band = cfg.face_band
+    occ = ref == OCCUPIED
+    bits = small_structure_bits(ref, cfg.face_max_area, resolution)
+    small = np.unpackbits(bits, bitorder="little")[:ref.size].reshape(ref.shape).astype(bool)
+    at_2 = grown(occ, 1)
+    in_band = grown(occ, band) & ~at_2 & ~occ
+    large_near = grown(occ & ~small, band)
+    zone = in_band & (~large_near | ((ref == FREE) & cfg.face_draw_beside_large))
+    need = np.where(large_near, max(cfg.face_min_hits, cfg.face_large_min_hits),
+                    cfg.face_min_hits)
+    hits = carried.hits.astype(np.int32) * 2 + 1
+    passes = carried.passes.astype(np.int32) * 2
+    enough = zone & (hits >= need)
+    steep_free = enough & (passes <= cfg.face_draw_ratio * hits)
+    rest = left.copy()
+    for key, met in (("reach", zone), ("hits", enough), ("crossed", steep_free)):
+        why = rest & ~near(met)
+        out[key] = int(why.sum())
+        rest &= ~why
+    candidates = np.unpackbits(carried.confirmed, bitorder="little")[:ref.size]
+    waiting = rest & near(candidates.reshape(ref.shape).astype(bool))
+    out["waiting"] = int(waiting.sum())
+    out["other"] = int((rest & ~waiting).sum())
+    return out
 
 
 def tally_wrong(c: dict, previous, updated, truth, kept, people) -> None:
@@ -129,6 +195,15 @@ def print_table(counts: dict) -> None:
     print("|---|---|---|")
     for label, key in WRONG:
         print(f"| {label} | {w[key]} | {100 * w[key] / max(1, wrong):.0f} % |")
+    why = counts["why"]
+    print("\n| why the faces rule drew none of the cells left to draw | within 3 cells of a wall, "
+          "rack or unmoved object | further |")
+    print("|---|---|---|")
+    print(f"| cells left to draw | {why['standing']['left']} | {why['away']['left']} |")
+    for label, key in (("no scan counted", "uncounted"),) + REASONS:
+        cells = [f"{why[k][key]} ({100 * why[k][key] / max(1, why[k]['left']):.0f} %)"
+                 for k in ("standing", "away")]
+        print(f"| {label} | {cells[0]} | {cells[1]} |")
 
 
 def main(argv=None) -> int:

@@ -405,9 +405,12 @@ def main(argv=None) -> int:
                          f"moved objects keep (default {LANE_MARGIN}; 0: the scenario checks "
                          f"only)")
     args = ap.parse_args(argv)
-    from onboard.methods import check_method
+    from onboard.methods import MethodError, check_method
 
-    check_method(args.method, "--method")      # before minutes of generation
+    try:
+        check_method(args.method, "--method")      # before minutes of generation
+    except MethodError as e:
+        ap.error(str(e))
     t0 = time.perf_counter()
     scn, moved = soak_scenario(args.sessions, args.seed, args.lane_margin)
     print(f"{args.sessions} sessions generated in {time.perf_counter() - t0:.0f} s",

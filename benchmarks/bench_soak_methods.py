@@ -2,12 +2,17 @@
 rearrangements, people and seeds, the map updated by the paper's method or by a baseline
 (``onboard.methods``), each chaining its own maps from session to session.
 
+Every column runs behind the robot profile's localiser and pose check, as ``bench_soak.py``
+does. ``paper`` is the paper's updater with the paper's settings (``bench_soak.py``'s own
+run, to the digit); ``robot`` is the same updater with the robot profile's; ``hybrid``,
+``fuse`` and ``remap`` take the robot profile's gating rules; ``none`` keeps M(i-1).
+
 Per method, over the sessions after the first: precision and recall (mean and least-squares
 trend per session), recall on the targets the session's own moves made, target cells, ghosts,
 cells occupied in the truth that a session freed, OPDF of M(i) and of the oracle, and the time
 per session. No bars: this compares, it does not judge.
 
-    python benchmarks/bench_soak_methods.py [--sessions N] [--seed S] [--methods paper,fuse,...]
+    python benchmarks/bench_soak_methods.py [--sessions N] [--seed S] [--methods paper,robot,...]
 """
 
 from __future__ import annotations
@@ -25,6 +30,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 import bench_soak  # noqa: E402  (beside this file)
+
+METHODS = ("paper", "robot", "hybrid", "fuse", "remap", "none")
+
+
+def run_options(method: str) -> dict:
+    """``bench_soak.run_soak``'s method and updater settings for a column."""
+    from updater import UpdaterConfig
+
+    if method == "paper":
+        return {"method": "paper", "updater_config": UpdaterConfig.profile("paper")}
+    if method == "robot":
+        return {"method": "paper", "updater_config": UpdaterConfig.profile("robot")}
+    return {"method": method}
 
 
 def _mean(values) -> float:
@@ -68,18 +86,23 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=50)
     ap.add_argument("--seed", type=int, default=2024, help="seed of the rearrangements")
-    ap.add_argument("--methods", default="paper,hybrid,fuse,remap,none")
+    ap.add_argument("--methods", default=",".join(METHODS),
+                    help=f"comma-separated, of {', '.join(METHODS)}")
     args = ap.parse_args(argv)
-    from onboard.methods import check_method
+    from onboard.methods import MethodError, check_method
 
-    methods = [check_method(m.strip(), "--methods") for m in args.methods.split(",")]
+    try:
+        methods = [check_method(m.strip(), "--methods", METHODS)
+                   for m in args.methods.split(",")]
+    except MethodError as e:
+        ap.error(str(e))
     t0 = time.perf_counter()
     scn, moved = bench_soak.soak_scenario(args.sessions, args.seed)
     results = {}
     for method in methods:
         print(f"{method} ...", file=sys.stderr, flush=True)
         results[method] = summary(bench_soak.run_soak(scn, moved, progress=False,
-                                                      method=method))
+                                                      **run_options(method)))
     print(f"| {args.sessions} sessions, seed {args.seed} | " + " | ".join(methods) + " |")
     print("|---|" + "---|" * len(methods))
     for label, fmt in ROWS:

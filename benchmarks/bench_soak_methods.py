@@ -8,11 +8,15 @@ run, to the digit); ``robot`` is the same updater with the robot profile's; ``hy
 ``fuse`` and ``remap`` take the robot profile's gating rules; ``none`` keeps M(i-1).
 
 Per method, over the sessions after the first: precision and recall (mean and least-squares
-trend per session), recall on the targets the session's own moves made, target cells, ghosts,
-cells occupied in the truth that a session freed, OPDF of M(i) and of the oracle, and the time
-per session. No bars: this compares, it does not judge.
+trend per session; precision pooled over the sessions' changes too), recall on the targets the
+session's own moves made, target cells, ghosts, cells occupied in the truth that a session
+freed, cells drawn inside objects and in free space within 3 cells of a surface (as
+``lifelong_misses.py`` counts them), OPDF of M(i) and of the oracle, the localiser's error
+(APE) and the time per session. No bars: this compares, it does not judge. ``--set`` lays
+updater keys over every column's settings, to try one rule off:
 
     python benchmarks/bench_soak_methods.py [--sessions N] [--seed S] [--methods paper,robot,...]
+        [--set KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -30,19 +34,36 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, os.environ.get("BENCH_CODE_ROOT") or str(Path(__file__).resolve().parents[1]))
 
 import bench_soak  # noqa: E402  (beside this file)
+import lifelong_misses  # noqa: E402
 
 METHODS = ("paper", "robot", "hybrid", "fuse", "remap", "none")
 
 
-def run_options(method: str) -> dict:
-    """``bench_soak.run_soak``'s method and updater settings for a column."""
+def run_options(method: str, overrides: dict | None = None) -> dict:
+    """``bench_soak.run_soak``'s method and updater settings for a column, with ``overrides``
+    (updater keys) laid over the settings."""
     from updater import UpdaterConfig
 
-    if method == "paper":
-        return {"method": "paper", "updater_config": UpdaterConfig.profile("paper")}
-    if method == "robot":
-        return {"method": "paper", "updater_config": UpdaterConfig.profile("robot")}
-    return {"method": method}
+    profile = "paper" if method == "paper" else "robot"
+    config = UpdaterConfig.profile(profile, overrides or None, "--set")
+    return {"method": "paper" if method in ("paper", "robot") else method,
+            "updater_config": config}
+
+
+def wrong_draws(scn) -> tuple[dict, callable]:
+    """Counts of the sessions' wrong changes by kind (``lifelong_misses.tally_wrong``) and the
+    ``run_soak`` hook that adds each session's, after the first."""
+    from gridmap import OCCUPIED
+
+    counts = dict.fromkeys(["changes"] + [k for _, k in lifelong_misses.WRONG], 0)
+
+    def tally(i, previous, res):
+        if i < 2:
+            return
+        kept = bench_soak.standing_cells(scn, i, res.truth) & (res.truth.data == OCCUPIED)
+        lifelong_misses.tally_wrong(counts, previous.data, res.updated.data, res.truth.data,
+                                    kept, res.masks["people"])
+    return counts, tally
 
 
 def _mean(values) -> float:
@@ -50,11 +71,15 @@ def _mean(values) -> float:
     return float(np.mean(v)) if v else float("nan")
 
 
-def summary(rows) -> dict:
+def summary(rows, wrong: dict) -> dict:
     rest = rows[1:] if len(rows) > 1 else rows
     k = max(1, len(rest) // 5)
+    bad = sum(wrong[key] for _, key in lifelong_misses.WRONG[:-1])
     return {
         "precision": _mean(r.precision for r in rest),
+        "pooled": 1 - bad / wrong["changes"] if wrong["changes"] else float("nan"),
+        "changes": wrong["changes"], "draw_inside": wrong["draw_inside"],
+        "draw_near": wrong["draw_near"], "ape": _mean(r.ape_rmse for r in rest),
         "precision_trend": bench_soak.trend([r.precision for r in rest]),
         "recall": _mean(r.recall for r in rest),
         "recall_trend": bench_soak.trend([r.recall for r in rest]),
@@ -71,14 +96,17 @@ def summary(rows) -> dict:
 
 
 ROWS = [("precision (trend per session)", "{precision:.3f} ({precision_trend:+.4f})"),
+        ("precision pooled (changes)", "{pooled:.3f} ({changes})"),
         ("recall on all targets (trend)", "{recall:.3f} ({recall_trend:+.4f})"),
         ("recall, first / last fifth", "{recall_first:.3f} / {recall_last:.3f}"),
         ("recall on new targets (trend)", "{recall_new:.3f} ({recall_new_trend:+.4f})"),
         ("target cells per session", "{targets:.0f}"),
         ("ghost cells, all sessions (most in one)", "{ghosts} ({ghosts_max})"),
         ("G-occupied cells freed, all sessions", "{g_freed}"),
+        ("cells drawn inside objects / 2-3 cells from a surface", "{draw_inside} / {draw_near}"),
         ("OPDF M(i) %, mean / last fifth", "{opdf:.2f} / {opdf_last:.2f}"),
         ("OPDF oracle %", "{opdf_oracle:.2f}"),
+        ("APE m per session", "{ape:.3f}"),
         ("wall s per session", "{wall_s:.2f}")]
 
 
@@ -88,21 +116,37 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=2024, help="seed of the rearrangements")
     ap.add_argument("--methods", default=",".join(METHODS),
                     help=f"comma-separated, of {', '.join(METHODS)}")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="updater keys over every column's settings (YAML values)")
     args = ap.parse_args(argv)
+    import yaml
+
     from onboard.methods import MethodError, check_method
+    from updater import UpdaterError
 
     try:
         methods = [check_method(m.strip(), "--methods", METHODS)
                    for m in args.methods.split(",")]
     except MethodError as e:
         ap.error(str(e))
+    try:
+        overrides = {k: yaml.safe_load(v) for k, v in (kv.split("=", 1) for kv in args.set)}
+        options = {m: run_options(m, overrides) for m in methods}
+    except UpdaterError as e:
+        ap.error(str(e).splitlines()[0])
+    except yaml.YAMLError:
+        ap.error(f"--set: a value is not valid YAML in {' '.join(args.set)!r}")
+    except ValueError:
+        ap.error(f"--set takes KEY=VALUE, got {' '.join(args.set)!r}")
     t0 = time.perf_counter()
     scn, moved = bench_soak.soak_scenario(args.sessions, args.seed)
     results = {}
     for method in methods:
         print(f"{method} ...", file=sys.stderr, flush=True)
-        results[method] = summary(bench_soak.run_soak(scn, moved, progress=False,
-                                                      **run_options(method)))
+        wrong, tally = wrong_draws(scn)
+        rows = bench_soak.run_soak(scn, moved, progress=False, on_session=tally,
+                                   **options[method])
+        results[method] = summary(rows, wrong)
     print(f"| {args.sessions} sessions, seed {args.seed} | " + " | ".join(methods) + " |")
     print("|---|" + "---|" * len(methods))
     for label, fmt in ROWS:

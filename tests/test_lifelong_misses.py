@@ -120,3 +120,35 @@ def test_the_cells_it_finds_past_every_condition_are_the_rules_own_candidates():
             past.append(rc)
     assert sorted(past) == sorted(map(tuple, np.argwhere(candidates)))
     assert sorted(past) == [(10, 24), (37, 40), (40, 36)]
+
+
+def test_wrong_changes_are_sorted_by_what_the_truth_holds_there():
+    """``tally_wrong`` on a hand-made session: each wrong change placed by hand in one kind,
+    and right changes (a moved box's old place freed, its new face drawn, a cell drawn one
+    off the truth's face) counted as changes only."""
+    truth = np.full((40, 40), FREE, np.int8)
+    truth[:3, :] = OCCUPIED                      # a wall that stood
+    truth[20:28, 20:28] = OCCUPIED               # a box moved here this session
+    truth[21:27, 21:27] = UNKNOWN                # its inside
+    previous = truth.copy()
+    previous[20:28, 20:28] = FREE                # M(i-1) had the box elsewhere ...
+    previous[27, 27] = OCCUPIED                  # ... but for a corner
+    previous[33, 33] = OCCUPIED                  # ... here
+    kept = np.zeros(truth.shape, bool)
+    kept[:3, :] = True
+    people = np.zeros(truth.shape, bool)
+    people[10:13, 30:33] = True
+    updated = previous.copy()
+    updated[33, 33] = FREE                       # right: the old place freed
+    updated[20, 20:28] = OCCUPIED                # right: the new face drawn
+    updated[19, 28] = OCCUPIED                   # right: a cell off the truth's face
+    updated[2, 5] = FREE                         # wrong: the wall freed
+    updated[27, 27] = FREE                       # wrong: the moved box freed
+    updated[23, 23] = OCCUPIED                   # wrong: inside the box, 3 cells deep
+    updated[17, 22] = OCCUPIED                   # wrong: 3 cells in front of the box
+    updated[11, 31] = OCCUPIED                   # wrong: far, where a person walked
+    updated[11, 5] = OCCUPIED                    # wrong: far, no one walked there
+    counts = dict.fromkeys(["changes"] + [k for _, k in lm.WRONG], 0)
+    lm.tally_wrong(counts, previous, updated, truth, kept, people)
+    assert counts == {"changes": 16, "free_standing": 1, "free_moved": 1, "free_inside": 0,
+                      "draw_inside": 1, "draw_near": 1, "draw_far": 2, "draw_people": 1}

@@ -150,7 +150,10 @@ def main(argv=None) -> int:
     print(f"| {args.sessions} sessions, seed {args.seed} | " + " | ".join(methods) + " |")
     print("|---|" + "---|" * len(methods))
     for label, fmt in ROWS:
-        print(f"| {label} | " + " | ".join(fmt.format(**results[m]) for m in methods) + " |")
+        cells = [fmt.format(**results[m]) for m in methods]
+        # a column that changed nothing has no precision
+        cells = ["n/a" if c.startswith("nan") else c for c in cells]
+        print(f"| {label} | " + " | ".join(cells) + " |")
     print(f"\nTotal wall time {time.perf_counter() - t0:.0f} s.")
     return 0
 

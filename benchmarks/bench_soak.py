@@ -390,6 +390,14 @@ def print_table(rows: list[SessionRow]) -> None:
               f"{r.scans_processed} |")
 
 
+def check_run_arguments(ap: argparse.ArgumentParser, args) -> None:
+    """A one-line error for a number of sessions or a seed the soak cannot take."""
+    if not 1 <= args.sessions <= 1000:
+        ap.error(f"--sessions must be 1-1000, got {args.sessions}")
+    if args.seed < 0:
+        ap.error(f"--seed must be 0 or more, got {args.seed}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=50)
@@ -405,6 +413,7 @@ def main(argv=None) -> int:
                          f"moved objects keep (default {LANE_MARGIN}; 0: the scenario checks "
                          f"only)")
     args = ap.parse_args(argv)
+    check_run_arguments(ap, args)
     from onboard.methods import MethodError, check_method
 
     try:

@@ -119,6 +119,7 @@ def main(argv=None) -> int:
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                     help="updater keys over every column's settings (YAML values)")
     args = ap.parse_args(argv)
+    bench_soak.check_run_arguments(ap, args)
     import yaml
 
     from onboard.methods import MethodError, check_method

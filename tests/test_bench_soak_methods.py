@@ -31,6 +31,8 @@ def test_a_misspelt_key_is_refused_with_the_nearest():
     (["--set", "move_faces"], "--set takes KEY=VALUE"),
     (["--set", "face_min_hits=0"], "face_min_hits"),
     (["--set", "move_faces=["], "not valid YAML"),
+    (["--sessions", "0"], "--sessions must be 1-1000"),
+    (["--seed", "-1"], "--seed must be 0 or more"),
 ])
 def test_a_mistake_on_the_command_line_is_one_line_before_any_session(argv, says, capsys):
     with pytest.raises(SystemExit) as e:

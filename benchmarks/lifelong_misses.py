@@ -106,12 +106,7 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
             c["old"] += int((left & (age >= 5)).sum())
             c["new"] += int((left & (age == 1)).sum())
             if kind == "draw":
-                for part, cells in (("standing", left & standing), ("away", left & ~standing)):
-                    why = counts["why"][part]
-                    why["left"] += int(cells.sum())
-                    for key, n in draw_reasons(previous.data, cells, res.faces, cfg,
-                                               previous.resolution).items():
-                        why[key] += n
+                tally_reasons(counts["why"], previous, left, standing, res.faces, cfg)
 
     bench_soak.run_soak(scn, what, on_session=tally, **bl.method_options("robot"))
     return counts
@@ -119,27 +114,44 @@ def misses(layout: str, seed: int, n: int, first: int, out_dir: Path) -> dict:
 
 def draw_reasons(ref: np.ndarray, left: np.ndarray, carried, cfg, resolution: float) -> dict:
     """Why the faces rule drew none of the cells ``left`` (to draw, as scored: no occupied
-    cell of M(i) within one), each cell by the first of the rule's draw conditions that no
-    cell within one of it meets, for the reference map ``ref`` (M(i-1)'s cells) and the
-    counts the session carried (``carried``: a ``FaceCounts``, halved). The halved counts give
-    each cell's hits as at most 2h + 1 and its crossings as at least 2p, so "short of hits"
-    and "crossed too often" hold of the session's own counts too. ``{key: cells}`` over
-    ``REASONS`` and "uncounted" (no scan counted: the rule off, or poses given)."""
+    cell of M(i) within one), for the reference map ``ref`` (M(i-1)'s cells) and the counts
+    the session carried (``carried``: a ``FaceCounts``, halved): ``{key: cells}`` over
+    ``REASONS`` and "uncounted" (no scan counted: the rule off, or poses given), each cell
+    counted by its ``reason_map`` entry."""
+    return count_reasons(reason_map(ref, carried, cfg, resolution), left)
+
+
+def count_reasons(reasons: np.ndarray | None, cells: np.ndarray) -> dict:
+    """``cells`` counted by their entries in ``reasons`` (a ``reason_map``; None: no scan
+    counted, every cell "uncounted")."""
+    out = dict.fromkeys(["uncounted"] + [k for _, k in REASONS], 0)
+    if reasons is None:
+        out["uncounted"] = int(cells.sum())
+    else:
+        found = np.bincount(reasons[cells], minlength=len(REASONS))
+        out.update({key: int(n) for (_, key), n in zip(REASONS, found)})
+    return out
+
+
+def reason_map(ref: np.ndarray, carried, cfg, resolution: float) -> np.ndarray | None:
+    """Per cell, the index in ``REASONS`` of the first of the faces rule's draw conditions
+    that no cell within one of it meets, read from ``carried`` (a ``FaceCounts``, halved: a
+    cell's hits are taken as at most 2h + 1 and its crossings as at least 2p, so "short of
+    hits" and "crossed too often" hold of the session's own counts too); None when no scan
+    counted."""
+    if carried is None or carried.hits.size == 0:
+        return None
     from gridmap import FREE, OCCUPIED
     from gridmap.masks import near
     from updater.faces import small_structure_bits
 
-    out = dict.fromkeys(["uncounted"] + [k for _, k in REASONS], 0)
-    if carried is None or carried.hits.size == 0:
-        out["uncounted"] = int(left.sum())
-        return out
-    band = cfg.face_band
+    def plane(bits):
+        return np.unpackbits(bits, bitorder="little")[:ref.size].reshape(ref.shape) == 1
+
     occ = ref == OCCUPIED
-    bits = small_structure_bits(ref, cfg.face_max_area, resolution)
-    small = np.unpackbits(bits, bitorder="little")[:ref.size].reshape(ref.shape).astype(bool)
-    at_2 = grown(occ, 1)
-    in_band = grown(occ, band) & ~at_2 & ~occ
-    large_near = grown(occ & ~small, band)
+    small = plane(small_structure_bits(ref, cfg.face_max_area, resolution))
+    in_band = grown(occ, cfg.face_band) & ~grown(occ, 1)
+    large_near = grown(occ & ~small, cfg.face_band)
     zone = in_band & (~large_near | ((ref == FREE) & cfg.face_draw_beside_large))
     need = np.where(large_near, max(cfg.face_min_hits, cfg.face_large_min_hits),
                     cfg.face_min_hits)
@@ -147,16 +159,23 @@ def draw_reasons(ref: np.ndarray, left: np.ndarray, carried, cfg, resolution: fl
     passes = carried.passes.astype(np.int32) * 2
     enough = zone & (hits >= need)
     steep_free = enough & (passes <= cfg.face_draw_ratio * hits)
-    rest = left.copy()
-    for key, met in (("reach", zone), ("hits", enough), ("crossed", steep_free)):
-        why = rest & ~near(met)
-        out[key] = int(why.sum())
-        rest &= ~why
-    candidates = np.unpackbits(carried.confirmed, bitorder="little")[:ref.size]
-    waiting = rest & near(candidates.reshape(ref.shape).astype(bool))
-    out["waiting"] = int(waiting.sum())
-    out["other"] = int((rest & ~waiting).sum())
-    return out
+    waiting = near(plane(carried.confirmed))
+    # the first condition failed, in REASONS' order: reach, hits, crossed, waiting, other
+    reasons = np.full(ref.shape, len(REASONS) - 1, np.int64)
+    for index, met in reversed(list(enumerate((zone, enough, steep_free)))):
+        reasons[~near(met)] = index
+    reasons[near(steep_free) & waiting] = 3
+    return reasons
+
+
+def tally_reasons(why: dict, previous, left, standing, carried, cfg) -> None:
+    """Add the session's cells left to draw to ``why`` by ``draw_reasons``, near what stands
+    and away from it, the reasons worked out once for the map."""
+    reasons = reason_map(previous.data, carried, cfg, previous.resolution)
+    for part, cells in (("standing", left & standing), ("away", left & ~standing)):
+        why[part]["left"] += int(cells.sum())
+        for key, n in count_reasons(reasons, cells).items():
+            why[part][key] += n
 
 
 def tally_wrong(c: dict, previous, updated, truth, kept, people) -> None:

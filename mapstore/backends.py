@@ -299,7 +299,7 @@ class SQLiteDB:
         _check_sqlite_file(path, create)
         try:
             self.conn = sqlite3.connect(str(path), timeout=LOCK_TIMEOUT, isolation_level=None)
-            self.conn.execute("PRAGMA journal_mode=WAL")
+            _wal_mode(self.conn)
             self.conn.execute("PRAGMA synchronous=FULL")
         except sqlite3.DatabaseError as e:
             raise StoreError(f"{path}: not a map store ({e})") from None
@@ -326,6 +326,23 @@ class SQLiteDB:
 
     def close(self) -> None:
         self.conn.close()
+
+
+def _wal_mode(conn: sqlite3.Connection) -> None:
+    """Turn on WAL, waiting for other connections as a write would. SQLite answers "database
+    is locked" at once, without its busy wait, when robots open a new file together and
+    another is switching it to WAL at that moment; so the switch is tried again until
+    LOCK_TIMEOUT."""
+    deadline, pause = time.monotonic() + LOCK_TIMEOUT, 0.005
+    while True:
+        try:
+            conn.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as e:
+            if "locked" not in str(e) or time.monotonic() + pause > deadline:
+                raise
+        time.sleep(pause)
+        pause = min(2 * pause, 0.2)
 
 
 def _check_sqlite_file(path: Path, create: bool) -> None:

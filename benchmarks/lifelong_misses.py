@@ -51,7 +51,7 @@ REASONS = (("no cell within one in the rule's reach (2 to face_band cells from M
            ("short of hits (face_min_hits beside objects, face_large_min_hits beside walls and "
             "racks)", "hits"),
            ("crossed too often (more than face_draw_ratio of the hits)", "crossed"),
-           ("a candidate, waiting for the next session to agree (face_sessions 2)", "waiting"),
+           ("a candidate, waiting for the next session to agree", "waiting"),
            ("other (another rule's output there, or no hit this session)", "other"))
 
 
@@ -164,7 +164,9 @@ def reason_map(ref: np.ndarray, carried, cfg, resolution: float) -> np.ndarray |
     reasons = np.full(ref.shape, len(REASONS) - 1, np.int64)
     for index, met in reversed(list(enumerate((zone, enough, steep_free)))):
         reasons[~near(met)] = index
-    reasons[near(steep_free) & waiting] = 3
+    # beside objects a draw waits for face_draw_sessions, in front of what stands face_sessions
+    waits = np.where(large_near, cfg.face_sessions, cfg.face_draw_sessions) > 1
+    reasons[near(steep_free) & waiting & waits] = 3
     return reasons
 
 

@@ -13,7 +13,7 @@ from updater.faces import FaceCounts
 
 CFG = dataclasses.replace(UpdaterConfig.profile("robot"), face_band=4, face_min_hits=4,
                           face_large_min_hits=5, face_draw_ratio=0.34, face_max_area=1.0,
-                          face_draw_beside_large=True)
+                          face_draw_beside_large=True, face_draw_sessions=2)
 RES = 0.05
 
 
@@ -57,6 +57,10 @@ def test_each_left_cell_gets_the_first_draw_condition_it_misses():
     want = dict.fromkeys(["uncounted"] + [k for _, k in lm.REASONS], 0)
     for reason in left_cells.values():
         want[reason] += 1
+    assert got == want
+    # drawing on one session's word, no cell waits: the candidate is "other"
+    got = lm.draw_reasons(ref, left, counts, dataclasses.replace(CFG, face_draw_sessions=1), RES)
+    want["waiting"], want["other"] = 0, want["other"] + 1
     assert got == want
 
 
@@ -108,7 +112,7 @@ def test_the_cells_it_finds_past_every_condition_are_the_rules_own_candidates():
               small_structure_bits(ref, CFG.face_max_area, RES))
     kernels().move_faces(ref, ref.copy(), tuple(a.astype(np.uint8) for a in session), planes,
                          CFG.face_band, CFG.face_min_passes, CFG.face_free_ratio,
-                         CFG.face_min_hits, CFG.face_draw_ratio, True,
+                         CFG.face_min_hits, CFG.face_draw_ratio, (True, True, True),
                          CFG.face_draw_beside_large, CFG.face_large_min_hits)
     candidates = np.unpackbits(planes[3], bitorder="little")[:n].reshape(shape).astype(bool)
     counts = FaceCounts(hits, passes, np.zeros(shape, np.uint8), None, _bits([], shape))

@@ -160,9 +160,10 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
     ``beside_large`` a free cell of M so is drawn beside any structure (an object set down in
     front of a wall or a rack) when ended in by ``large_min_hits`` scans or more too, an
     unknown one still only beside small ones. Each
-    candidate's bit is set in ``candidates`` (a bit plane, cleared first); with ``confirm``
-    only those also set in ``confirmed`` (the last session's candidates) are moved. Returns
-    (cells freed, cells drawn)."""
+    candidate's bit is set in ``candidates`` (a bit plane, cleared first); ``confirm``: (to
+    free, to draw beside small structures only, to draw beside a larger one), with each only
+    those candidates also set in ``confirmed`` (the last session's candidates) are so moved.
+    Returns (cells freed, cells drawn)."""
     hits, passes, behind = counts
     now, crossed, confirmed, candidates, small = planes
     height, width = ref.shape
@@ -172,7 +173,7 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
         for col in range(width):
             idx = row * width + col
             m, h, p = ref[row, col], hits[row, col], passes[row, col]
-            to = -1
+            to, kind = -1, 0
             if m == OCCUPIED and out[row, col] == OCCUPIED:
                 if p >= min_passes and h + behind[row, col] <= free_ratio * p and \
                         bit_get(small, idx) and bit_get(crossed, idx):
@@ -182,11 +183,11 @@ def move_faces(ref, out, counts, planes, band, min_passes, free_ratio, min_hits,
                 near, all_small = _nearest_occupied(ref, small, row, col, band)
                 if 2 <= near <= band and (all_small or (beside_large and m == FREE
                                                         and h >= large_min_hits)):
-                    to = OCCUPIED
+                    to, kind = OCCUPIED, 1 if all_small else 2
             if to < 0:
                 continue
             test_and_set(candidates, idx)
-            if confirm and not bit_get(confirmed, idx):
+            if confirm[kind] and not bit_get(confirmed, idx):
                 continue
             out[row, col] = to
             if to == FREE:

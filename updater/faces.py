@@ -3,9 +3,10 @@ cell, the processed scans whose beams ended in it, those whose beams crossed it 
 their hit, and those whose beams ended just before it. They belong to the world's cells, not to a map, so they go on from one session to the
 next (``MapUpdater.carried_faces``, ``MapUpdater(..., faces=)``), halved at each new session:
 a face that one session sees only a few times is moved once a few sessions have seen it so.
-With ``face_sessions`` 2 a cell is freed only when the rule would have freed it at the end of
-the last session too (``confirmed``): what a single session saw, a pose a few centimetres off
-along a whole recording, frees nothing; ``face_draw_sessions`` 2 asks the same of a draw.
+With ``face_sessions`` 2 a cell is freed, or drawn in front of a wall or rack, only when the
+rule would have done so at the end of the last session too (``confirmed``): what a single
+session saw, a pose a few centimetres off along a whole recording, frees nothing and thickens
+no wall; ``face_draw_sessions`` 2 asks the same of a draw beside an object.
 Three bytes per cell once a scan has counted, none before (the rule off, or only poses
 taken as given); bounded, however many sessions.
 """
@@ -36,8 +37,8 @@ class FaceCounts:
     # (None: none yet)
     now: np.ndarray | None = None
     # bit plane of the cells the rule would have moved at the end of the last session (None:
-    # none): with face_sessions 2 a cell is freed, with face_draw_sessions 2 drawn, only when
-    # two sessions in a row agree
+    # none): with face_sessions 2 a cell is freed or drawn in front of a wall, with
+    # face_draw_sessions 2 drawn beside an object, only when two sessions in a row agree
     confirmed: np.ndarray | None = None
     # bit plane of the cells this session's steep beams crossed (counted in ``passes``): the
     # session's own, never carried; a cell is freed only when crossed this session too

@@ -130,9 +130,17 @@ def main(argv=None) -> int:
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                     help="updater keys over the robot's defaults (YAML values), to try others")
     args = ap.parse_args(argv)
-    import yaml
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_soak import parse_set  # beside this file
 
-    overrides = {k: yaml.safe_load(v) for k, v in (kv.split("=", 1) for kv in args.set)}
+    from gridmap import MapUpdatingError
+
+    overrides = parse_set(ap, args.set)
+    try:                      # a wrong key in one line here, not a traceback from each worker
+        for method in args.methods:
+            method_placement(method, overrides)
+    except MapUpdatingError as e:
+        ap.error(str(e).splitlines()[0])
     if not DATA.is_dir():
         print(f"skipped: {DATA} not found")
         return 0

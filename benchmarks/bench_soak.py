@@ -398,6 +398,23 @@ def check_run_arguments(ap: argparse.ArgumentParser, args) -> None:
         ap.error(f"--seed must be 0 or more, got {args.seed}")
 
 
+def parse_set(ap: argparse.ArgumentParser, items: list[str]) -> dict:
+    """``--set KEY=VALUE ...`` as {key: the value read as YAML}; a one-line error for an item
+    without a key and "=", or a value that is not YAML."""
+    import yaml
+
+    out = {}
+    for item in items:
+        key, eq, value = item.partition("=")
+        if not key or not eq:
+            ap.error(f"--set takes KEY=VALUE, got {item!r}")
+        try:
+            out[key] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            ap.error(f"--set: {key}: {value!r} is not valid YAML")
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=50)

@@ -120,8 +120,6 @@ def main(argv=None) -> int:
                     help="updater keys over every column's settings (YAML values)")
     args = ap.parse_args(argv)
     bench_soak.check_run_arguments(ap, args)
-    import yaml
-
     from onboard.methods import MethodError, check_method
     from updater import UpdaterError
 
@@ -130,15 +128,11 @@ def main(argv=None) -> int:
                    for m in args.methods.split(",")]
     except MethodError as e:
         ap.error(str(e))
+    overrides = bench_soak.parse_set(ap, args.set)
     try:
-        overrides = {k: yaml.safe_load(v) for k, v in (kv.split("=", 1) for kv in args.set)}
         options = {m: run_options(m, overrides) for m in methods}
     except UpdaterError as e:
         ap.error(str(e).splitlines()[0])
-    except yaml.YAMLError:
-        ap.error(f"--set: a value is not valid YAML in {' '.join(args.set)!r}")
-    except ValueError:
-        ap.error(f"--set takes KEY=VALUE, got {' '.join(args.set)!r}")
     t0 = time.perf_counter()
     scn, moved = bench_soak.soak_scenario(args.sessions, args.seed)
     results = {}
